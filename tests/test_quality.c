@@ -1,0 +1,75 @@
+/* Tests for sim/quality.c: the quality measure and dihedral angles on tets with known answers. */
+#include "quality.h"
+#include "ns_test.h"
+
+static int regular_tet(void)
+{
+    double p[4][3] = {{1, 1, 1}, {-1, 1, -1}, {1, -1, -1}, {-1, -1, 1}};
+    ENSURE_SMALL(ns_tet_quality(p[0], p[1], p[2], p[3]) - 1.0, 1e-12);
+    double ang[6];
+    double mn = ns_tet_dihedrals(p[0], p[1], p[2], p[3], ang);
+    double want = acos(1.0 / 3.0) * 180.0 / M_PI; /* 70.5288 degrees */
+    for (int i = 0; i < 6; i++)
+        ENSURE_SMALL(ang[i] - want, 1e-9);
+    ENSURE_SMALL(mn - want, 1e-9);
+    /* Swapping two vertices inverts it: negative quality, same angles. */
+    ENSURE_SMALL(ns_tet_quality(p[1], p[0], p[2], p[3]) + 1.0, 1e-12);
+    return 0;
+}
+
+static int corner_tet(void)
+{
+    /* The corner tet of a unit cube: right dihedral angles at the three edges through the
+     * origin; the three edges of the slanted face x+y+z=1 have acos(1/sqrt 3) = 54.7356. */
+    double p[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    double ang[6];
+    ns_tet_dihedrals(p[0], p[1], p[2], p[3], ang);
+    double slant = acos(1.0 / sqrt(3.0)) * 180.0 / M_PI;
+    /* edges 01, 02, 03 meet at the origin: 90 degrees */
+    ENSURE_SMALL(ang[0] - 90.0, 1e-9);
+    ENSURE_SMALL(ang[1] - 90.0, 1e-9);
+    ENSURE_SMALL(ang[2] - 90.0, 1e-9);
+    ENSURE_SMALL(ang[3] - slant, 1e-9);
+    ENSURE_SMALL(ang[4] - slant, 1e-9);
+    ENSURE_SMALL(ang[5] - slant, 1e-9);
+    ENSURE_SMALL(ns_tet_volume(p[0], p[1], p[2], p[3]) - 1.0 / 6.0, 1e-15);
+    return 0;
+}
+
+static int flat_tet(void)
+{
+    double p[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+    ENSURE_SMALL(ns_tet_quality(p[0], p[1], p[2], p[3]), 1e-15);
+    double ang[6];
+    double mn = ns_tet_dihedrals(p[0], p[1], p[2], p[3], ang);
+    ENSURE_SMALL(mn, 1e-6);
+    double coinc[4][3] = {{0, 0, 0}, {0, 0, 0}, {0, 1, 0}, {1, 1, 1}};
+    ENSURE(ns_tet_dihedrals(coinc[0], coinc[1], coinc[2], coinc[3], NULL) == 0.0);
+    return 0;
+}
+
+static int mesh_stats(void)
+{
+    NsMesh m;
+    ns_mesh_init(&m);
+    double p[5][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}};
+    for (int i = 0; i < 5; i++)
+        ns_mesh_add_node(&m, p[i]);
+    int a[4] = {0, 1, 2, 3}, b[4] = {2, 1, 3, 4};
+    ns_mesh_add_tet(&m, a, 0);
+    ENSURE(ns_tet_volume(p[2], p[1], p[3], p[4]) < 0); /* inverted on purpose */
+    ns_mesh_add_tet(&m, b, 1);
+    NsQualityStats s;
+    ns_mesh_quality(&m, false, &s);
+    ENSURE(s.tets == 2 && s.inverted == 1 && s.worst_tet == 1 && s.min_quality < 0);
+    ENSURE_SMALL(s.max_dihedral_deg - 90.0, 1e-9);
+    /* World coordinates are used when asked: flip the second tet by moving node 4. */
+    m.x[3 * 4 + 0] = m.x[3 * 4 + 1] = m.x[3 * 4 + 2] = -1.0;
+    ns_mesh_quality(&m, true, &s);
+    ENSURE(s.inverted == 0);
+    ns_mesh_free(&m);
+    return 0;
+}
+
+NS_TEST_MAIN({"regular_tet", regular_tet}, {"corner_tet", corner_tet}, {"flat_tet", flat_tet},
+             {"mesh_stats", mesh_stats})
