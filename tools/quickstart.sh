@@ -56,6 +56,8 @@ run)
     ;;
 test)
     passed=0; failed=0
+    # A build that breaks still ends with the summary line CI reads.
+    trap 'rc=$?; [ $rc -eq 0 ] || echo "$passed passed, $((failed + 1)) failed"' EXIT
     count() { # dir: add the meson test summary of dir to the totals
         local ok fail
         ok=$(sed -n 's/^ *Ok: *\([0-9]*\).*/\1/p' "$1/summary.txt" 2>/dev/null | tail -1)
@@ -73,6 +75,7 @@ test)
     build build-asan -Dbuildtype=debug -Dwerror=true -Db_sanitize=address,undefined \
         -Db_lundef=false
     UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ASAN_OPTIONS=detect_leaks=1 runtests build-asan
+    trap - EXIT
     echo "$passed passed, $failed failed"
     [ "$failed" -eq 0 ]
     ;;

@@ -1,0 +1,10 @@
+/* 3x3 singular value decomposition with the inversion-safe sign convention of Irving, Teran
+ * and Fedkiw 2004 (paper §3.2): F = U diag(s) V^T with U and V proper rotations (det +1),
+ * s[0] >= s[1] >= |s[2]|, and s[2] < 0 exactly when det F < 0 (an inverted element). */
+#ifndef NS_SVD3_H
+#define NS_SVD3_H
+
+/* Matrices are row-major 3x3. */
+void ns_svd3(const double F[9], double U[9], double s[3], double V[9]);
+
+#endif
