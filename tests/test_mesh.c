@@ -173,7 +173,7 @@ static int boundary_detects_nonmanifold(void)
     /* Two tets touching at a single vertex: closed at every edge but not vertex-manifold. */
     NsMesh m;
     ns_mesh_init(&m);
-    double p[7][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1},
+    double p[7][3] = {{0, 0, 0},  {1, 0, 0},  {0, 1, 0}, {0, 0, 1},
                       {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
     for (int i = 0; i < 7; i++)
         ns_mesh_add_node(&m, p[i]);

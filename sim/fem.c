@@ -1,0 +1,394 @@
+/* Invertible FEM for one tetrahedron (paper §3.2 after Irving, Teran & Fedkiw 2004).
+ *
+ * F = Ds Bm, F = U diag(s) V^T (inversion-safe SVD), P = U P^(s) V^T with the model's stress
+ * P^ evaluated on the diagonal, forces f_a = -W P g_a where g_a are the rest shape gradients
+ * (rows of Bm; g_0 = -(g_1 + g_2 + g_3)). The Jacobians hold U and V fixed (§3.2): in the
+ * rotated frame a perturbation dF^ = U^T dF V maps to dP^ through a 3x3 block on the diagonal
+ * entries and a 2x2 block on each off-diagonal pair (F^_ij, F^_ji) (Teran et al. 2005), which is
+ * also where the neo-Hookean tangent is made definite. */
+#include "fem.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "svd3.h"
+
+NsFemMaterial ns_fem_material(NsElasticModel model, double youngs, double poisson, double damp_mu,
+                              double damp_lambda)
+{
+    NsFemMaterial m;
+    m.model = model;
+    m.mu = youngs / (2.0 * (1.0 + poisson));
+    m.lambda = youngs * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
+    m.damp_mu = damp_mu;
+    m.damp_lambda = damp_lambda;
+    return m;
+}
+
+static double det3(const double *M)
+{
+    return M[0] * (M[4] * M[8] - M[5] * M[7]) - M[1] * (M[3] * M[8] - M[5] * M[6]) +
+           M[2] * (M[3] * M[7] - M[4] * M[6]);
+}
+
+int ns_fem_rest(const double *u0, const double *u1, const double *u2, const double *u3,
+                NsTetRest *out)
+{
+    double Dm[9];
+    for (int i = 0; i < 3; i++) {
+        Dm[3 * i + 0] = u1[i] - u0[i];
+        Dm[3 * i + 1] = u2[i] - u0[i];
+        Dm[3 * i + 2] = u3[i] - u0[i];
+    }
+    double d = det3(Dm);
+    out->W = d / 6.0;
+    if (!(d > 0.0))
+        return -1;
+    double *B = out->Bm;
+    B[0] = (Dm[4] * Dm[8] - Dm[5] * Dm[7]) / d;
+    B[1] = (Dm[2] * Dm[7] - Dm[1] * Dm[8]) / d;
+    B[2] = (Dm[1] * Dm[5] - Dm[2] * Dm[4]) / d;
+    B[3] = (Dm[5] * Dm[6] - Dm[3] * Dm[8]) / d;
+    B[4] = (Dm[0] * Dm[8] - Dm[2] * Dm[6]) / d;
+    B[5] = (Dm[2] * Dm[3] - Dm[0] * Dm[5]) / d;
+    B[6] = (Dm[3] * Dm[7] - Dm[4] * Dm[6]) / d;
+    B[7] = (Dm[1] * Dm[6] - Dm[0] * Dm[7]) / d;
+    B[8] = (Dm[0] * Dm[4] - Dm[1] * Dm[3]) / d;
+    return 0;
+}
+
+/* Rest shape gradients g (4 x 3): F = sum_a x_a g_a^T. */
+static void shape_gradients(const NsTetRest *r, double g[12])
+{
+    for (int k = 0; k < 3; k++) {
+        g[3 + k] = r->Bm[0 + k];
+        g[6 + k] = r->Bm[3 + k];
+        g[9 + k] = r->Bm[6 + k];
+        g[k] = -(g[3 + k] + g[6 + k] + g[9 + k]);
+    }
+}
+
+/* M = sum_a y_a g_a^T for four vectors y (F from positions, dF/dt from velocities). */
+static void gradient_of(const double g[12], const double *const y[4], double M[9])
+{
+    memset(M, 0, 9 * sizeof(double));
+    for (int a = 0; a < 4; a++)
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                M[3 * i + j] += y[a][i] * g[3 * a + j];
+}
+
+/* out = A^T M B (all 3x3 row-major). */
+static void rot_in(const double *A, const double *M, const double *B, double *out)
+{
+    double T[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            T[3 * i + j] =
+                M[3 * i + 0] * B[0 + j] + M[3 * i + 1] * B[3 + j] + M[3 * i + 2] * B[6 + j];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            out[3 * i + j] = A[0 + i] * T[0 + j] + A[3 + i] * T[3 + j] + A[6 + i] * T[6 + j];
+}
+
+/* out = A M B^T. */
+static void rot_out(const double *A, const double *M, const double *B, double *out)
+{
+    double T[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            T[3 * i + j] = M[3 * i + 0] * B[3 * j + 0] + M[3 * i + 1] * B[3 * j + 1] +
+                           M[3 * i + 2] * B[3 * j + 2];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            out[3 * i + j] =
+                A[3 * i + 0] * T[0 + j] + A[3 * i + 1] * T[3 + j] + A[3 * i + 2] * T[6 + j];
+}
+
+/* Diagonal stress P^(s) of the model, with Irving's linear extrapolation of the neo-Hookean
+ * stress below NS_FEM_NEOHOOKEAN_S_MIN (it has a log J that is undefined when inverted). */
+static void diag_stress(const NsFemMaterial *m, const double s[3], double P[3])
+{
+    if (m->model == NS_MODEL_COROTATIONAL) {
+        double tr = s[0] + s[1] + s[2] - 3.0;
+        for (int i = 0; i < 3; i++)
+            P[i] = 2.0 * m->mu * (s[i] - 1.0) + m->lambda * tr;
+        return;
+    }
+    double c[3];
+    for (int i = 0; i < 3; i++)
+        c[i] = s[i] > NS_FEM_NEOHOOKEAN_S_MIN ? s[i] : NS_FEM_NEOHOOKEAN_S_MIN;
+    double lj = log(c[0] * c[1] * c[2]);
+    for (int i = 0; i < 3; i++) {
+        P[i] = m->mu * (c[i] - 1.0 / c[i]) + m->lambda * lj / c[i];
+        if (c[i] != s[i]) { /* first-order extrapolation along s_i */
+            double dP =
+                m->mu * (1.0 + 1.0 / (c[i] * c[i])) + m->lambda * (1.0 - lj) / (c[i] * c[i]);
+            P[i] += dP * (s[i] - c[i]);
+        }
+    }
+}
+
+/* Tangent of the stress in the rotated frame: dP^_ii = sum_k A_ik dF^_kk and
+ * dP^_ij = a_ij dF^_ij + b_ij dF^_ji for the pairs (0,1), (0,2), (1,2). */
+typedef struct Tangent {
+    double A[9];
+    double a[3], b[3];
+} Tangent;
+
+static const int pair_ij[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+
+static void elastic_tangent(const NsFemMaterial *m, const double s[3], Tangent *t)
+{
+    if (m->model == NS_MODEL_COROTATIONAL) {
+        /* dP^ = mu (dF^ + dF^T) + lambda tr(dF^) I */
+        for (int i = 0; i < 3; i++)
+            for (int k = 0; k < 3; k++)
+                t->A[3 * i + k] = m->lambda + (i == k ? 2.0 * m->mu : 0.0);
+        for (int p = 0; p < 3; p++)
+            t->a[p] = t->b[p] = m->mu;
+        return;
+    }
+    /* Neo-Hookean, P = mu (F - F^-T) + lambda log J F^-T, differentiated at F^ = diag(c):
+     * A_ik = (mu + (mu - lambda log J) / c_i^2) delta_ik + lambda / (c_i c_k),
+     * a_ij = mu, b_ij = (mu - lambda log J) / (c_i c_j). */
+    double c[3];
+    for (int i = 0; i < 3; i++)
+        c[i] = s[i] > NS_FEM_NEOHOOKEAN_S_MIN ? s[i] : NS_FEM_NEOHOOKEAN_S_MIN;
+    double lj = log(c[0] * c[1] * c[2]);
+    double q = m->mu - m->lambda * lj;
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            t->A[3 * i + k] =
+                m->lambda / (c[i] * c[k]) + (i == k ? m->mu + q / (c[i] * c[i]) : 0.0);
+    for (int p = 0; p < 3; p++) {
+        t->a[p] = m->mu;
+        t->b[p] = q / (c[pair_ij[p][0]] * c[pair_ij[p][1]]);
+    }
+}
+
+/* Clamp the eigenvalues of the symmetric 3x3 A at zero (cyclic Jacobi; tiny and exact enough). */
+static void project_psd3(double A[9])
+{
+    double V[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, M[9];
+    memcpy(M, A, sizeof M);
+    for (int sweep = 0; sweep < 20; sweep++) {
+        double off = M[1] * M[1] + M[2] * M[2] + M[5] * M[5];
+        if (off <= 1e-28 * (M[0] * M[0] + M[4] * M[4] + M[8] * M[8]) || off == 0.0)
+            break;
+        for (int k = 0; k < 3; k++) {
+            int p = pair_ij[k][0], qq = pair_ij[k][1];
+            double apq = M[3 * p + qq];
+            if (apq == 0.0)
+                continue;
+            double tau = (M[3 * qq + qq] - M[3 * p + p]) / (2.0 * apq);
+            double t = (tau >= 0.0 ? 1.0 : -1.0) / (fabs(tau) + sqrt(1.0 + tau * tau));
+            double c = 1.0 / sqrt(1.0 + t * t), sn = t * c;
+            for (int r = 0; r < 3; r++) {
+                double x = M[3 * r + p], y = M[3 * r + qq];
+                M[3 * r + p] = c * x - sn * y;
+                M[3 * r + qq] = sn * x + c * y;
+            }
+            for (int r = 0; r < 3; r++) {
+                double x = M[3 * p + r], y = M[3 * qq + r];
+                M[3 * p + r] = c * x - sn * y;
+                M[3 * qq + r] = sn * x + c * y;
+            }
+            for (int r = 0; r < 3; r++) {
+                double x = V[3 * r + p], y = V[3 * r + qq];
+                V[3 * r + p] = c * x - sn * y;
+                V[3 * r + qq] = sn * x + c * y;
+            }
+        }
+    }
+    double lam[3] = {M[0] > 0 ? M[0] : 0, M[4] > 0 ? M[4] : 0, M[8] > 0 ? M[8] : 0};
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            A[3 * i + j] = V[3 * i + 0] * lam[0] * V[3 * j + 0] +
+                           V[3 * i + 1] * lam[1] * V[3 * j + 1] +
+                           V[3 * i + 2] * lam[2] * V[3 * j + 2];
+}
+
+static void project_tangent(Tangent *t)
+{
+    project_psd3(t->A);
+    for (int p = 0; p < 3; p++) {
+        /* [[a, b], [b, a]] has eigenvalues a + b and a - b on (1, 1) and (1, -1). */
+        double l1 = t->a[p] + t->b[p], l2 = t->a[p] - t->b[p];
+        l1 = l1 > 0 ? l1 : 0;
+        l2 = l2 > 0 ? l2 : 0;
+        t->a[p] = 0.5 * (l1 + l2);
+        t->b[p] = 0.5 * (l1 - l2);
+    }
+}
+
+static void apply_tangent(const Tangent *t, const double dF[9], double dP[9])
+{
+    for (int i = 0; i < 3; i++)
+        dP[4 * i] = t->A[3 * i + 0] * dF[0] + t->A[3 * i + 1] * dF[4] + t->A[3 * i + 2] * dF[8];
+    for (int p = 0; p < 3; p++) {
+        int i = pair_ij[p][0], j = pair_ij[p][1];
+        dP[3 * i + j] = t->a[p] * dF[3 * i + j] + t->b[p] * dF[3 * j + i];
+        dP[3 * j + i] = t->a[p] * dF[3 * j + i] + t->b[p] * dF[3 * i + j];
+    }
+}
+
+/* Damping stress in the rotated frame: P^d = dmu (dF^ + dF^T) + dlambda tr(dF^) I. */
+static void damping_tangent(const NsFemMaterial *m, Tangent *t)
+{
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            t->A[3 * i + k] = m->damp_lambda + (i == k ? 2.0 * m->damp_mu : 0.0);
+    for (int p = 0; p < 3; p++)
+        t->a[p] = t->b[p] = m->damp_mu;
+}
+
+/* f_a -= W P g_a */
+static void add_forces(const NsTetRest *r, const double g[12], const double P[9], double f[12])
+{
+    for (int a = 0; a < 4; a++)
+        for (int i = 0; i < 3; i++)
+            f[3 * a + i] -= r->W * (P[3 * i + 0] * g[3 * a + 0] + P[3 * i + 1] * g[3 * a + 1] +
+                                    P[3 * i + 2] * g[3 * a + 2]);
+}
+
+static void damping_forces(const NsTetRest *r, const NsFemMaterial *mat, const NsTetFrame *fr,
+                           const double g[12], const double *const v[4], double f[12])
+{
+    if (mat->damp_mu == 0.0 && mat->damp_lambda == 0.0)
+        return;
+    double Fd[9], Fdh[9], Pdh[9], Pd[9];
+    gradient_of(g, v, Fd);
+    rot_in(fr->U, Fd, fr->V, Fdh);
+    Tangent t;
+    damping_tangent(mat, &t);
+    apply_tangent(&t, Fdh, Pdh);
+    rot_out(fr->U, Pdh, fr->V, Pd);
+    add_forces(r, g, Pd, f);
+}
+
+void ns_fem_tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
+                       const double *const v[4], double f[12], NsTetFrame *frame)
+{
+    double g[12], F[9], Ph[9] = {0}, P[9], ps[3];
+    shape_gradients(r, g);
+    gradient_of(g, x, F);
+    ns_svd3(F, frame->U, frame->s, frame->V);
+    diag_stress(mat, frame->s, ps);
+    Ph[0] = ps[0];
+    Ph[4] = ps[1];
+    Ph[8] = ps[2];
+    rot_out(frame->U, Ph, frame->V, P);
+    memset(f, 0, 12 * sizeof(double));
+    add_forces(r, g, P, f);
+    damping_forces(r, mat, frame, g, v, f);
+}
+
+static void inverse3(const double *M, double *out)
+{
+    double d = det3(M);
+    out[0] = (M[4] * M[8] - M[5] * M[7]) / d;
+    out[1] = (M[2] * M[7] - M[1] * M[8]) / d;
+    out[2] = (M[1] * M[5] - M[2] * M[4]) / d;
+    out[3] = (M[5] * M[6] - M[3] * M[8]) / d;
+    out[4] = (M[0] * M[8] - M[2] * M[6]) / d;
+    out[5] = (M[2] * M[3] - M[0] * M[5]) / d;
+    out[6] = (M[3] * M[7] - M[4] * M[6]) / d;
+    out[7] = (M[1] * M[6] - M[0] * M[7]) / d;
+    out[8] = (M[0] * M[4] - M[1] * M[3]) / d;
+}
+
+void ns_fem_tet_forces_fixed_frame(const NsTetRest *r, const NsFemMaterial *mat,
+                                   const NsTetFrame *frame, const double *const x[4],
+                                   const double *const v[4], double f[12])
+{
+    double g[12], F[9], Fh[9], Ph[9], P[9];
+    shape_gradients(r, g);
+    gradient_of(g, x, F);
+    rot_in(frame->U, F, frame->V, Fh);
+    if (mat->model == NS_MODEL_COROTATIONAL) {
+        double tr = Fh[0] + Fh[4] + Fh[8] - 3.0;
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                Ph[3 * i + j] = mat->mu * (Fh[3 * i + j] + Fh[3 * j + i]) +
+                                (i == j ? mat->lambda * tr - 2.0 * mat->mu : 0.0);
+    } else {
+        /* The full-matrix neo-Hookean stress (valid where det F^ > 0). */
+        double Fi[9];
+        inverse3(Fh, Fi);
+        double lj = log(det3(Fh));
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                Ph[3 * i + j] =
+                    mat->mu * (Fh[3 * i + j] - Fi[3 * j + i]) + mat->lambda * lj * Fi[3 * j + i];
+    }
+    rot_out(frame->U, Ph, frame->V, P);
+    memset(f, 0, 12 * sizeof(double));
+    add_forces(r, g, P, f);
+    damping_forces(r, mat, frame, g, v, f);
+}
+
+/* J (12 x 12) block (a, b) = -W U [tangent (U^T e_d) (V^T g_b)^T] V^T g_a, column by column. */
+static void assemble(const NsTetRest *r, const NsTetFrame *fr, const double g[12], const Tangent *t,
+                     double J[144])
+{
+    double Vg[12]; /* V^T g_b */
+    for (int b = 0; b < 4; b++)
+        for (int j = 0; j < 3; j++)
+            Vg[3 * b + j] = fr->V[0 + j] * g[3 * b + 0] + fr->V[3 + j] * g[3 * b + 1] +
+                            fr->V[6 + j] * g[3 * b + 2];
+    for (int b = 0; b < 4; b++)
+        for (int d = 0; d < 3; d++) {
+            double dFh[9], dPh[9], Y[9];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    dFh[3 * i + j] = fr->U[3 * d + i] * Vg[3 * b + j];
+            apply_tangent(t, dFh, dPh);
+            /* dP g_a = U dP^ (V^T g_a): Y = U dP^, then contract with Vg_a. */
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    Y[3 * i + j] = fr->U[3 * i + 0] * dPh[0 + j] + fr->U[3 * i + 1] * dPh[3 + j] +
+                                   fr->U[3 * i + 2] * dPh[6 + j];
+            int col = 3 * b + d;
+            for (int a = 0; a < 4; a++)
+                for (int i = 0; i < 3; i++)
+                    J[12 * (3 * a + i) + col] =
+                        -r->W * (Y[3 * i + 0] * Vg[3 * a + 0] + Y[3 * i + 1] * Vg[3 * a + 1] +
+                                 Y[3 * i + 2] * Vg[3 * a + 2]);
+        }
+}
+
+void ns_fem_tet_jacobians(const NsTetRest *r, const NsFemMaterial *mat, const NsTetFrame *frame,
+                          int project, double K[144], double D[144])
+{
+    double g[12];
+    shape_gradients(r, g);
+    Tangent t;
+    if (K) {
+        elastic_tangent(mat, frame->s, &t);
+        if (project)
+            project_tangent(&t);
+        assemble(r, frame, g, &t, K);
+    }
+    if (D) {
+        damping_tangent(mat, &t);
+        assemble(r, frame, g, &t, D);
+    }
+}
+
+double ns_fem_tet_energy(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4])
+{
+    double g[12], F[9], U[9], V[9], s[3];
+    shape_gradients(r, g);
+    gradient_of(g, x, F);
+    ns_svd3(F, U, s, V);
+    if (mat->model == NS_MODEL_COROTATIONAL) {
+        double tr = s[0] + s[1] + s[2] - 3.0, e = 0.0;
+        for (int i = 0; i < 3; i++)
+            e += (s[i] - 1.0) * (s[i] - 1.0);
+        return r->W * (mat->mu * e + 0.5 * mat->lambda * tr * tr);
+    }
+    double lj = log(s[0] * s[1] * s[2]);
+    return r->W * (0.5 * mat->mu * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2] - 3.0) - mat->mu * lj +
+                   0.5 * mat->lambda * lj * lj);
+}
