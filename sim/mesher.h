@@ -22,8 +22,11 @@ typedef struct NsMesherRegion {
 
 typedef struct NsMesherDef {
     double spacing;     /* lattice spacing h: the long (axis-aligned) lattice edge [m] */
-    double alpha_long;  /* warp threshold on long edges, fraction of the edge */
-    double alpha_short; /* warp threshold on short edges */
+    /* Warp thresholds, fractions of the edge, for cuts against OUTSIDE (the outer boundary).
+     * Cuts between two regions warp with at most 0.21509 / 0.35900 ("two-sided" values, see
+     * docs/mesher.md), since both sides of such an interface are kept. */
+    double alpha_long;  /* on long edges, in (0, 0.5) */
+    double alpha_short; /* on short edges, in (0, 0.5) */
     const NsMesherRegion *regions;
     int region_count;
     /* Lattice box. If lo[0] > hi[0] it is taken from the regions' bounds. The lattice is

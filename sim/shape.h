@@ -1,7 +1,7 @@
 /* Signed-distance shapes for the mesher: primitives, CSG and transforms.
  * Convention: negative inside, positive outside, zero on the surface, in metres. The value is
- * an exact distance for sphere, box, cylinder and capsule, a bound for the others; the mesher
- * needs only a correct sign and a continuous function. */
+ * an exact distance for sphere, box, cylinder and capsule, an approximate distance with an
+ * exact sign for the others; the mesher needs only a correct sign and a continuous function. */
 #ifndef NS_SHAPE_H
 #define NS_SHAPE_H
 
