@@ -1,7 +1,7 @@
 /* Linear solvers behind one interface (§3.1 Eq. 5-6, §3.6.2): CG and Jacobi-PCG on the block
  * matrix, CHOLMOD supernodal Cholesky, and CG preconditioned by a stale Cholesky factor.
  *
- * Fixed (Dirichlet) nodes are removed by working on full-length vectors whose fixed entries are
+ * Fixed (Dirichlet) DOFs are removed by working on full-length vectors whose fixed entries are
  * held at zero in every search direction, after moving A_fc x_c to the right-hand side. The
  * CHOLMOD paths copy the free-free block into compressed-column form (upper triangle); the
  * symbolic analysis (METIS ordering) is redone only when the sparsity pattern changes. */
@@ -111,9 +111,8 @@ static int number_dofs(NsSolver *s, int n, const uint8_t *fixed)
     if (ensure((void **)&s->dof, &s->dof_cap, 3 * n > 0 ? 3 * n : 1, sizeof(int)))
         return -1;
     int f = 0;
-    for (int i = 0; i < n; i++)
-        for (int c = 0; c < 3; c++)
-            s->dof[3 * i + c] = (fixed && fixed[i]) ? -1 : f++;
+    for (int i = 0; i < 3 * n; i++)
+        s->dof[i] = (fixed && fixed[i]) ? -1 : f++;
     return f;
 }
 
@@ -121,7 +120,8 @@ static uint64_t pattern_hash(const NsBlockMatrix *A, const int *dof)
 {
     uint64_t h = 1469598103934665603ull;
     for (int i = 0; i < A->n; i++) {
-        h = (h ^ (uint64_t)(uint32_t)dof[3 * i]) * 1099511628211ull;
+        for (int c = 0; c < 3; c++)
+            h = (h ^ (uint64_t)(uint32_t)(dof[3 * i + c] >= 0)) * 1099511628211ull;
         for (int p = 0; p < A->rows[i].count; p++)
             h = (h ^ (uint64_t)(uint32_t)A->rows[i].col[p]) * 1099511628211ull;
         h = (h ^ 0xFFFFu) * 1099511628211ull;

@@ -6,8 +6,9 @@
  *   STALE_PCG   CG preconditioned by a Cholesky factor of an *earlier* matrix, refactored when
  *               the iteration count grows past refresh_iterations (DESIGN.md: 3-19 iterations
  *               for the changes a step makes, against ~200 for plain CG)
- * Fixed nodes are Dirichlet: their entries of x are kept as given, and the system is solved
- * for the others (A_ff x_f = b_f - A_fc x_c). */
+ * Fixed DOFs are Dirichlet: their entries of x are kept as given, and the system is solved
+ * for the others (A_ff x_f = b_f - A_fc x_c). A DOF mask (not a node mask) lets a node slide
+ * along a plane (fixed in one direction, free in the others). */
 #ifndef NS_SOLVER_H
 #define NS_SOLVER_H
 
@@ -42,11 +43,11 @@ void ns_solver_set_refresh_iterations(NsSolver *s, int iterations);
 /* Drop the factor: the next DIRECT / STALE_PCG solve factors the matrix it is given. */
 void ns_solver_refresh(NsSolver *s);
 
-/* Solves A x = b. node_fixed (n entries, may be NULL) marks Dirichlet nodes. x holds the
+/* Solves A x = b. dof_fixed (3n entries, may be NULL) marks Dirichlet DOFs. x holds the
  * initial guess (and the fixed values) on entry. tol is relative to ||b_f - A_fc x_c||.
  * Returns 0, or -1 on a CHOLMOD failure (not positive definite, memory) with stats filled as
  * far as they got. Non-convergence within max_iter is reported in stats, not as an error. */
-int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *node_fixed, const double *b,
+int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed, const double *b,
                     double *x, double tol, int max_iter, NsSolveStats *stats);
 
 #endif
