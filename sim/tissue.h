@@ -1,0 +1,97 @@
+/* The deformable tissue: a tet mesh with per-region materials, lumped masses, invertible FEM
+ * forces (§3.2), lazily updated Jacobians (§3.6.3, Eq. 12) and the Newmark step (§3.1,
+ * Eq. 1-5: beta = 1/4, gamma = 1/2, one Newton step on the accelerations).
+ *
+ * Model (read-only while stepping): materials, densities, gravity, Newmark parameters, lazy
+ * threshold. State: the mesh (positions, velocities, accelerations), the per-tet frames the
+ * Jacobians were last built from, the assembled K = dF/dx and D = dF/dv. */
+#ifndef NS_TISSUE_H
+#define NS_TISSUE_H
+
+#include <stdint.h>
+
+#include "fem.h"
+#include "mesh.h"
+#include "solver.h"
+#include "sparse.h"
+
+/* Smallest singular value below which a tet's stiffness is projected to be definite. */
+#define NS_TISSUE_PROJECT_BELOW 0.9
+
+typedef struct NsTissueMaterial {
+    NsFemMaterial fem;
+    double density; /* [kg/m^3] */
+} NsTissueMaterial;
+
+typedef struct NsTissueParams {
+    double gravity[3];  /* [m/s^2] */
+    double beta, gamma; /* Newmark; 1/4, 1/2 = trapezoidal rule (energy conserving) */
+    /* Lazy Jacobian threshold (§3.6.3): a tet's Jacobian is rebuilt when the largest change of
+     * an entry of U or V, or the largest relative change of a singular value, since its last
+     * rebuild exceeds this (dimensionless; 0 = rebuild every tet every step). Our measure is
+     * scale-free, unlike the paper's Eq. 12, so its value is ours; see docs/validation.md. */
+    double lazy_threshold;
+    double solve_tol;   /* relative residual of each linear solve */
+    int solve_max_iter; /* CG iteration cap */
+} NsTissueParams;
+
+NsTissueParams ns_default_tissue_params(void);
+
+typedef struct NsTissueStats {
+    double force_ms, jacobian_ms, solve_ms, total_ms;
+    int cg_iterations;
+    int factorized;
+    double jacobian_fraction; /* fraction of tets whose Jacobian was rebuilt this step */
+    int nan_count;            /* non-finite values caught (the step is rejected) */
+    int inverted;             /* tets with det F <= 0 after the step */
+    int unconverged;          /* linear solves that missed their tolerance */
+} NsTissueStats;
+
+typedef struct NsTissue {
+    NsMesh mesh; /* owned */
+    NsTissueParams params;
+    int material_count;
+    NsTissueMaterial *materials; /* (material_count), indexed by tet region */
+    NsTetRest *rest;             /* (tet_slots) */
+    NsTetFrame *frame;           /* (tet_slots) frame of the last force evaluation */
+    NsTetFrame *jframe; /* (tet_slots) frame the tet's Jacobian contribution was built from */
+    uint8_t *jvalid;    /* (tet_slots) 1 if its contribution is in K and D */
+    double *mass;       /* (node_slots) lumped [kg] */
+    double *force;      /* (3 node_slots) total force at the current state [N] */
+    uint8_t *dof_fixed; /* (3 node_slots) */
+    NsBlockMatrix K, D, A;
+    double *work; /* scratch, 4 x 3 node_slots */
+    uint64_t steps;
+} NsTissue;
+
+/* Takes a copy of mesh. materials[r] is used for tets of region r. Nodes flagged
+ * NS_NODE_FIXED are held. Returns 0, or -1 with a message (a flat or inverted rest tet, a
+ * region without a material, bad material values, memory). */
+int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *materials,
+                   int material_count, const NsTissueParams *params, char *err, int err_sz);
+void ns_tissue_free(NsTissue *t);
+
+/* Fix or free one DOF (node i, axis c) as a Dirichlet condition. */
+void ns_tissue_fix_dof(NsTissue *t, int node, int axis, int fixed);
+
+/* Forces (elastic, damping, gravity) at the current state into t->force, and K, D updated
+ * lazily (all tets if force_all). Counts NaNs and inverted tets into stats. */
+void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats);
+
+/* One Newmark step of size dt [s] (§3.1): assemble, solve (M - beta dt^2 K - gamma dt D) a' =
+ * F + K (dt v + dt^2 (1/2 - beta) a) + D dt (1 - gamma) a, update x, v, a. ext (3 node_slots,
+ * may be NULL) adds external forces [N]. Returns 0, or -1 if the solver failed or the result was
+ * not finite (the state is then left as before the step, and stats say why). */
+int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
+                   NsTissueStats *stats);
+
+/* Static equilibrium by Newton's method on the free DOFs (fixed DOFs keep their x): stops when
+ * the free residual force is below tol times the largest applied or reaction force, or after
+ * max_newton iterations. ext as above. Returns the number of iterations, or -1. */
+int ns_tissue_static_solve(NsTissue *t, NsSolver *solver, const double *ext, double tol,
+                           int max_newton, NsTissueStats *stats);
+
+/* Kinetic + elastic energy [J] (for the energy-drift validation). */
+double ns_tissue_energy(const NsTissue *t);
+
+#endif
