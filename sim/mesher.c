@@ -812,6 +812,25 @@ static int stuff_tet(Ctx *c, const Local *L, char *err, int err_sz)
             for (int a = 0; a < 3; a++)
                 mid[a] = 0.25 * (q[0][a] + q[1][a] + q[2][a] + centroid[a]);
             int lab = label_at(c, mid);
+            if (lab == OUTSIDE) {
+                /* Keep the whole junction tet: a cone tet dropped here leaves boundary faces
+                 * that meet the apex, and two such can touch at an edge or a vertex only (a
+                 * non-manifold boundary). Kept, it takes the region of the nearest lattice
+                 * vertex inside; the boundary then follows this lattice tet's faces, one cell
+                 * at most from the surface. */
+                double best = INFINITY;
+                for (int i = 0; i < 4; i++) {
+                    if (L->lab[i] == OUTSIDE)
+                        continue;
+                    double d2 = 0.0;
+                    for (int a = 0; a < 3; a++)
+                        d2 += (p[i][a] - mid[a]) * (p[i][a] - mid[a]);
+                    if (d2 < best) {
+                        best = d2;
+                        lab = L->lab[i];
+                    }
+                }
+            }
             push_tet(&o, CENTROID, tri[k][0], tri[k][1], tri[k][2], lab);
         }
     }
