@@ -1,0 +1,8 @@
+/* The needlesim subcommands: each takes its own argv (argv[0] is the command's name) and
+ * returns the process exit status: 0 success, 1 bad input or failure, 2 usage error. */
+#ifndef NS_COMMANDS_H
+#define NS_COMMANDS_H
+
+int ns_cmd_check(int argc, char **argv);
+
+#endif

@@ -1,0 +1,488 @@
+/* The scenario sandbox (see lua_runtime.h). */
+#include "lua_runtime.h"
+
+#include <errno.h>
+#include <stdbool.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include <lauxlib.h>
+#include <lualib.h>
+
+#include "ns_config.h"
+
+/* The count hook runs every NS_HOOK_STEP instructions and charges them to the budget. */
+#define NS_HOOK_STEP 10000
+/* A line event (only while the scenario chunk runs) costs about this many instructions, and
+ * is charged so (a tight endless loop fires one per iteration). */
+#define NS_LINE_EVENT_COST 8
+/* Memory a scenario's Lua state may hold; past it allocations fail ("not enough memory"). */
+#define NS_LUA_MEMORY_LIMIT ((size_t)1 << 30)
+
+struct NsLua {
+    lua_State *L;
+    char *scripts_dir;
+    char *scenario_dir;
+    char *scenario_source; /* "@path" of the scenario chunk, for the line hook */
+    long long budget;      /* instructions per protected entry */
+    long long remaining;   /* left in the current entry */
+    int last_line;         /* last line run in the scenario chunk (see ns_where) */
+    int hook_mask;         /* LUA_MASKCOUNT, plus LUA_MASKLINE while the chunk runs */
+    int modules_ref;       /* registry ref: the private require cache */
+    size_t memory;         /* bytes held by the state */
+};
+
+/* The cache holds this while a module is loading, to catch require cycles. */
+static const char loading_marker = 0;
+
+static NsLua *runtime_of(lua_State *L)
+{
+    return *(NsLua **)lua_getextraspace(L);
+}
+
+static char *dup_string(const char *s)
+{
+    size_t n = strlen(s) + 1;
+    char *d = malloc(n);
+    if (d)
+        memcpy(d, s, n);
+    return d;
+}
+
+/* Copies the first line of msg into err (Lua messages are one line, but a __tostring or a
+ * message with embedded newlines must not break the one-line contract). */
+static void copy_first_line(char *err, int err_sz, const char *msg)
+{
+    if (err_sz <= 0)
+        return;
+    size_t n = strcspn(msg, "\n");
+    while (n > 0 && (msg[n - 1] == ' ' || msg[n - 1] == '\r' || msg[n - 1] == '\t'))
+        n--;
+    if (n >= (size_t)err_sz)
+        n = (size_t)err_sz - 1;
+    memcpy(err, msg, n);
+    err[n] = '\0';
+}
+
+/* The name errors and `where` strings show for a function's source: the whole path for
+ * files (Lua's own short_src cuts long ones), the short form for strings. */
+static const char *source_name(const lua_Debug *ar)
+{
+    return ar->source && ar->source[0] == '@' ? ar->source + 1 : ar->short_src;
+}
+
+static void *limited_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
+{
+    size_t *used = ud;
+    size_t old = ptr ? osize : 0;
+    if (nsize == 0) {
+        free(ptr);
+        *used -= old;
+        return NULL;
+    }
+    if (nsize > old && *used - old + nsize > NS_LUA_MEMORY_LIMIT)
+        return NULL;
+    void *p = realloc(ptr, nsize);
+    if (p)
+        *used = *used - old + nsize;
+    return p;
+}
+
+static void set_hook(lua_State *L, int mask, int count);
+
+/* Count events charge the budget; line events (only while the scenario chunk runs) remember
+ * where in the scenario file we are. */
+static void hook(lua_State *L, lua_Debug *ar)
+{
+    NsLua *rt = runtime_of(L);
+    if (ar->event == LUA_HOOKLINE) {
+        if (rt->scenario_source && lua_getinfo(L, "S", ar) &&
+            strcmp(ar->source, rt->scenario_source) == 0)
+            rt->last_line = ar->currentline;
+        rt->remaining -= NS_LINE_EVENT_COST;
+        if (rt->remaining > 0)
+            return;
+    } else if (ar->event == LUA_HOOKCOUNT) {
+        rt->remaining -= NS_HOOK_STEP;
+        if (rt->remaining > 0)
+            return;
+    } else {
+        return;
+    }
+    /* Exhausted: from now on every instruction fails, so a script that catches the error with
+     * pcall cannot go on looping; the error unwinds every pcall up to C. */
+    set_hook(L, rt->hook_mask, 1);
+    if (lua_getinfo(L, "Sl", ar) && ar->currentline > 0)
+        lua_pushfstring(L, "%s:%d: instruction limit exceeded (endless loop?)", source_name(ar),
+                        ar->currentline);
+    else
+        lua_pushstring(L, "instruction limit exceeded (endless loop?)");
+    lua_error(L);
+}
+
+static void set_hook(lua_State *L, int mask, int count)
+{
+    lua_sethook(L, hook, mask, count);
+}
+
+static int message_handler(lua_State *L)
+{
+    if (lua_type(L, 1) == LUA_TSTRING || lua_type(L, 1) == LUA_TNUMBER) {
+        lua_tostring(L, 1);
+        lua_settop(L, 1);
+        return 1;
+    }
+    if (luaL_callmeta(L, 1, "__tostring") && lua_type(L, -1) == LUA_TSTRING)
+        return 1;
+    lua_pushfstring(L, "(error object is a %s value)", luaL_typename(L, 1));
+    return 1;
+}
+
+int ns_lua_call(NsLua *rt, int nargs, int nresults, char *err, int err_sz)
+{
+    lua_State *L = rt->L;
+    int base = lua_gettop(L) - nargs; /* the function's slot */
+    lua_pushcfunction(L, message_handler);
+    lua_insert(L, base);
+    rt->remaining = rt->budget;
+    set_hook(L, rt->hook_mask, NS_HOOK_STEP);
+    int rc = lua_pcall(L, nargs, nresults, base);
+    if (rc == LUA_ERRMEM) {
+        /* No message handler runs for memory errors, so no file:line either. */
+        snprintf(err, (size_t)err_sz, "%s: not enough memory (a scenario may use %d MiB)",
+                 rt->scenario_source ? rt->scenario_source + 1 : "needlesim",
+                 (int)(NS_LUA_MEMORY_LIMIT >> 20));
+        lua_pop(L, 1);
+        lua_remove(L, base);
+        return -1;
+    }
+    if (rc != LUA_OK) {
+        const char *msg = lua_tostring(L, -1);
+        copy_first_line(err, err_sz, msg ? msg : "unknown Lua error");
+        lua_pop(L, 1);
+        lua_remove(L, base);
+        return -1;
+    }
+    lua_remove(L, base);
+    return 0;
+}
+
+/* print(...): like Lua's, but to stderr (stdout carries --json). */
+static int sandbox_print(lua_State *L)
+{
+    int n = lua_gettop(L);
+    for (int i = 1; i <= n; i++) {
+        size_t len;
+        const char *s = luaL_tolstring(L, i, &len);
+        if (i > 1)
+            fputc('\t', stderr);
+        fwrite(s, 1, len, stderr);
+        lua_pop(L, 1);
+    }
+    fputc('\n', stderr);
+    return 0;
+}
+
+/* load(chunk [, chunkname [, mode [, env]]]): the base library's load with mode forced to
+ * text, so no precompiled (unverified) bytecode gets in. Without env the chunk sees the
+ * sandbox's globals, which are all a scenario ever sees. */
+static int sandbox_load(lua_State *L)
+{
+    int n = lua_gettop(L);
+    lua_pushvalue(L, lua_upvalueindex(1));
+    lua_pushvalue(L, 1);
+    if (n >= 2)
+        lua_pushvalue(L, 2);
+    else
+        lua_pushnil(L);
+    lua_pushliteral(L, "t");
+    if (n >= 4)
+        lua_pushvalue(L, 4);
+    lua_call(L, n >= 4 ? 4 : 3, LUA_MULTRET);
+    return lua_gettop(L) - n;
+}
+
+/* __ns_where(level): "file:line" of the function `level` levels up (1 = the caller of
+ * __ns_where, as for error()). When that frame has no line, because the caller made a tail
+ * call (`return ns.scenario{...}` does) and so left the stack, the last scenario line run is
+ * the best answer there is. */
+static int ns_where(lua_State *L)
+{
+    int level = (int)luaL_optinteger(L, 1, 1);
+    lua_Debug ar;
+    if (level >= 0 && lua_getstack(L, level, &ar) && lua_getinfo(L, "Sl", &ar) &&
+        ar.currentline > 0) {
+        lua_pushfstring(L, "%s:%d", source_name(&ar), ar.currentline);
+        return 1;
+    }
+    NsLua *rt = runtime_of(L);
+    if (rt->scenario_source && rt->last_line > 0)
+        lua_pushfstring(L, "%s:%d", rt->scenario_source + 1, rt->last_line);
+    else if (rt->scenario_source)
+        lua_pushstring(L, rt->scenario_source + 1);
+    else
+        lua_pushliteral(L, "?");
+    return 1;
+}
+
+/* Module names: plain words separated by dots ("helpers", "needlesim.materials"); no path
+ * separators, no "..", nothing absolute. */
+static bool valid_module_name(const char *name)
+{
+    size_t n = strlen(name);
+    if (n == 0 || name[0] == '.' || name[n - 1] == '.' || strstr(name, "..") != NULL)
+        return false;
+    for (size_t i = 0; i < n; i++) {
+        char c = name[i];
+        bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                  c == '_' || c == '-' || c == '.';
+        if (!ok)
+            return false;
+    }
+    return true;
+}
+
+/* Pushes the file path module `name` resolves to. */
+static void push_module_path(lua_State *L, NsLua *rt, const char *name)
+{
+    static const char prefix[] = "needlesim.";
+    luaL_Buffer b;
+    luaL_buffinit(L, &b);
+    const char *rest;
+    if (strcmp(name, "needlesim") == 0) {
+        luaL_addstring(&b, rt->scripts_dir);
+        luaL_addstring(&b, "/needlesim");
+        rest = NULL;
+    } else if (strncmp(name, prefix, sizeof prefix - 1) == 0) {
+        luaL_addstring(&b, rt->scripts_dir);
+        luaL_addstring(&b, "/needlesim/");
+        rest = name + sizeof prefix - 1;
+    } else {
+        if (strcmp(rt->scenario_dir, ".") != 0) {
+            luaL_addstring(&b, rt->scenario_dir);
+            luaL_addchar(&b, '/');
+        }
+        rest = name;
+    }
+    for (const char *p = rest; p && *p; p++)
+        luaL_addchar(&b, *p == '.' ? '/' : *p);
+    luaL_addstring(&b, ".lua");
+    luaL_pushresult(&b);
+}
+
+/* require(name): see lua_runtime.h. Modules run once; their result is cached privately (a
+ * scenario cannot reach or poison the cache). */
+static int sandbox_require(lua_State *L)
+{
+    NsLua *rt = runtime_of(L);
+    const char *name = luaL_checkstring(L, 1);
+    static const char *const unavailable[] = {"io", "os", "package", "debug", "ffi", "jit", NULL};
+    for (int i = 0; unavailable[i]; i++)
+        if (strcmp(name, unavailable[i]) == 0)
+            return luaL_error(L,
+                              "require '%s': module not available in the needlesim sandbox "
+                              "(scenarios cannot use io, os, package or debug)",
+                              name);
+    if (!valid_module_name(name))
+        return luaL_error(L,
+                          "require '%s': invalid module name (use 'needlesim.<name>' or a plain "
+                          "name for a .lua file beside the scenario; no paths)",
+                          name);
+
+    lua_rawgeti(L, LUA_REGISTRYINDEX, rt->modules_ref); /* 2: cache */
+    lua_getfield(L, 2, name);
+    if (lua_touserdata(L, -1) == &loading_marker)
+        return luaL_error(L, "require '%s': circular require (the module requires itself)", name);
+    if (!lua_isnil(L, -1))
+        return 1;
+    lua_pop(L, 1);
+
+    push_module_path(L, rt, name); /* 3: path */
+    const char *path = lua_tostring(L, 3);
+    struct stat st;
+    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode))
+        return luaL_error(L, "require '%s': module not found (no file '%s')", name, path);
+    if (luaL_loadfilex(L, path, "t") != LUA_OK) /* 4: chunk */
+        return lua_error(L);
+    lua_pushlightuserdata(L, (void *)&loading_marker);
+    lua_setfield(L, 2, name);
+    lua_pushvalue(L, 1);
+    lua_pushvalue(L, 3);
+    if (lua_pcall(L, 2, 1, 0) != LUA_OK) {
+        lua_pushnil(L);
+        lua_setfield(L, 2, name);
+        return lua_error(L); /* rethrow, message unchanged */
+    }
+    if (lua_isnil(L, -1)) {
+        lua_pop(L, 1);
+        lua_pushboolean(L, 1);
+    }
+    lua_pushvalue(L, -1);
+    lua_setfield(L, 2, name);
+    return 1;
+}
+
+/* Sets up the libraries and the sandbox's globals (runs protected: it allocates). */
+static int open_sandbox(lua_State *L)
+{
+    static const luaL_Reg libs[] = {
+        {LUA_GNAME, luaopen_base},
+        {LUA_TABLIBNAME, luaopen_table},
+        {LUA_STRLIBNAME, luaopen_string},
+        {LUA_MATHLIBNAME, luaopen_math},
+        {LUA_UTF8LIBNAME, luaopen_utf8},
+        {LUA_COLIBNAME, luaopen_coroutine},
+        {NULL, NULL},
+    };
+    for (const luaL_Reg *lib = libs; lib->func; lib++) {
+        luaL_requiref(L, lib->name, lib->func, 1);
+        lua_pop(L, 1);
+    }
+    NsLua *rt = runtime_of(L);
+
+    lua_pushglobaltable(L);
+    lua_pushnil(L);
+    lua_setfield(L, -2, "dofile");
+    lua_pushnil(L);
+    lua_setfield(L, -2, "loadfile");
+    lua_getfield(L, -1, "load");
+    lua_pushcclosure(L, sandbox_load, 1);
+    lua_setfield(L, -2, "load");
+    lua_pushcfunction(L, sandbox_print);
+    lua_setfield(L, -2, "print");
+    lua_pushcfunction(L, sandbox_require);
+    lua_setfield(L, -2, "require");
+    lua_pushcfunction(L, ns_where);
+    lua_setfield(L, -2, "__ns_where");
+
+    lua_getfield(L, -1, "string");
+    lua_pushnil(L);
+    lua_setfield(L, -2, "dump");
+    lua_pop(L, 1);
+
+    /* Deterministic random numbers unless the scenario reseeds. */
+    lua_getfield(L, -1, "math");
+    lua_getfield(L, -1, "randomseed");
+    lua_pushinteger(L, 0x6e73);
+    lua_call(L, 1, 0);
+    lua_pop(L, 2);
+
+    lua_newtable(L);
+    rt->modules_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    return 0;
+}
+
+NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
+{
+    NsLua *rt = calloc(1, sizeof *rt);
+    if (!rt) {
+        snprintf(err, (size_t)err_sz, "needlesim: out of memory");
+        return NULL;
+    }
+    rt->budget = NS_LUA_DEFAULT_BUDGET;
+    const char *env = getenv("NEEDLESIM_SCRIPTS");
+    rt->scripts_dir = dup_string(env && env[0] ? env : NS_SCRIPTS_DIR);
+    const char *slash = strrchr(scenario_path, '/');
+    if (!slash) {
+        rt->scenario_dir = dup_string(".");
+    } else if (slash == scenario_path) {
+        rt->scenario_dir = dup_string("/");
+    } else {
+        size_t n = (size_t)(slash - scenario_path);
+        rt->scenario_dir = malloc(n + 1);
+        if (rt->scenario_dir) {
+            memcpy(rt->scenario_dir, scenario_path, n);
+            rt->scenario_dir[n] = '\0';
+        }
+    }
+    rt->L = lua_newstate(limited_alloc, &rt->memory);
+    if (!rt->scripts_dir || !rt->scenario_dir || !rt->L) {
+        ns_lua_close(rt);
+        snprintf(err, (size_t)err_sz, "needlesim: out of memory");
+        return NULL;
+    }
+    *(NsLua **)lua_getextraspace(rt->L) = rt;
+    rt->hook_mask = LUA_MASKCOUNT;
+    lua_pushcfunction(rt->L, open_sandbox);
+    if (ns_lua_call(rt, 0, 0, err, err_sz) != 0) {
+        ns_lua_close(rt);
+        return NULL;
+    }
+    return rt;
+}
+
+void ns_lua_close(NsLua *rt)
+{
+    if (!rt)
+        return;
+    if (rt->L)
+        lua_close(rt->L);
+    free(rt->scripts_dir);
+    free(rt->scenario_dir);
+    free(rt->scenario_source);
+    free(rt);
+}
+
+lua_State *ns_lua_state(NsLua *rt)
+{
+    return rt->L;
+}
+
+const char *ns_lua_scripts_dir(const NsLua *rt)
+{
+    return rt->scripts_dir;
+}
+
+const char *ns_lua_scenario_dir(const NsLua *rt)
+{
+    return rt->scenario_dir;
+}
+
+void ns_lua_set_budget(NsLua *rt, long long instructions)
+{
+    rt->budget = instructions > 0 ? instructions : NS_LUA_DEFAULT_BUDGET;
+}
+
+int ns_lua_run_scenario(NsLua *rt, const char *path, char *err, int err_sz)
+{
+    lua_State *L = rt->L;
+    struct stat st;
+    if (stat(path, &st) != 0) {
+        snprintf(err, (size_t)err_sz, "needlesim: cannot open '%s': %s", path, strerror(errno));
+        return -1;
+    }
+    if (S_ISDIR(st.st_mode)) {
+        snprintf(err, (size_t)err_sz, "needlesim: cannot open '%s': Is a directory", path);
+        return -1;
+    }
+    int rc = luaL_loadfilex(L, path, "t");
+    if (rc != LUA_OK) {
+        const char *msg = lua_tostring(L, -1);
+        if (rc == LUA_ERRFILE)
+            snprintf(err, (size_t)err_sz, "needlesim: %s", msg ? msg : "cannot read scenario");
+        else
+            copy_first_line(err, err_sz, msg ? msg : "cannot load scenario");
+        lua_pop(L, 1);
+        return -1;
+    }
+    free(rt->scenario_source);
+    size_t n = strlen(path);
+    rt->scenario_source = malloc(n + 2);
+    if (!rt->scenario_source) {
+        lua_pop(L, 1);
+        snprintf(err, (size_t)err_sz, "needlesim: out of memory");
+        return -1;
+    }
+    rt->scenario_source[0] = '@';
+    memcpy(rt->scenario_source + 1, path, n + 1);
+    rt->last_line = 0;
+    /* Line events only while the chunk itself runs: they cost, and only constructors called
+     * by the chunk need them (ns_where). */
+    rt->hook_mask = LUA_MASKCOUNT | LUA_MASKLINE;
+    rc = ns_lua_call(rt, 0, 1, err, err_sz);
+    rt->hook_mask = LUA_MASKCOUNT;
+    set_hook(L, rt->hook_mask, NS_HOOK_STEP);
+    return rc;
+}

@@ -1,0 +1,72 @@
+/* needlesim: the command line (DESIGN.md "Command line"; the contract tests rely on).
+ *
+ * Exit status: 0 success, 1 bad input or a failed run (one line on stderr), 2 usage error or
+ * a command this version does not have yet. */
+#include <stdio.h>
+#include <string.h>
+
+#include "commands.h"
+#include "ns_config.h"
+
+#if NS_HAVE_OPENBLAS
+/* From OpenBLAS (declared here to avoid depending on where its cblas.h lives). */
+void openblas_set_num_threads(int num_threads);
+char *openblas_get_config(void);
+#endif
+
+static const char usage[] =
+    "usage: needlesim COMMAND [ARGS]\n"
+    "\n"
+    "  needlesim check SCENARIO.lua [--json] [--mesh-out FILE.vtu|FILE.msh]\n"
+    "      run the scenario, build its tissue mesh and print mesh and model statistics\n"
+    "  needlesim run SCENARIO.lua [-o DIR] [...]          (not available in this version yet)\n"
+    "  needlesim validate [CASE...] [--json]              (not available in this version yet)\n"
+    "  needlesim bench SCENARIO.lua [...]                 (not available in this version yet)\n"
+    "  needlesim --help | --version\n"
+    "\n"
+    "Scenarios are Lua files; see docs/scenarios.md.\n";
+
+static void print_version(void)
+{
+    printf("needlesim %s\n", NS_VERSION);
+#if NS_HAVE_OPENBLAS
+    const char *config = openblas_get_config();
+    printf("BLAS: %s\n", config ? config : "OpenBLAS");
+#else
+    printf("BLAS: system default (OpenBLAS not linked)\n");
+#endif
+}
+
+int main(int argc, char **argv)
+{
+#if NS_HAVE_OPENBLAS
+    /* One BLAS thread unless a command asks for more: the environment must not decide
+     * (meson.build, DESIGN.md: more threads slowed CHOLMOD on 2 cores). */
+    openblas_set_num_threads(1);
+#endif
+    if (argc < 2) {
+        fputs(usage, stderr);
+        return 2;
+    }
+    const char *cmd = argv[1];
+    if (strcmp(cmd, "--help") == 0 || strcmp(cmd, "-h") == 0 || strcmp(cmd, "help") == 0) {
+        fputs(usage, stdout);
+        return 0;
+    }
+    if (strcmp(cmd, "--version") == 0 || strcmp(cmd, "-V") == 0) {
+        print_version();
+        return 0;
+    }
+    if (strcmp(cmd, "check") == 0)
+        return ns_cmd_check(argc - 1, argv + 1);
+    if (strcmp(cmd, "run") == 0 || strcmp(cmd, "validate") == 0 || strcmp(cmd, "bench") == 0) {
+        fprintf(stderr, "needlesim: '%s' is not available in this version yet\n", cmd);
+        return 2;
+    }
+    if (cmd[0] == '-')
+        fprintf(stderr, "needlesim: unknown option '%s'\n", cmd);
+    else
+        fprintf(stderr, "needlesim: unknown command '%s'\n", cmd);
+    fputs(usage, stderr);
+    return 2;
+}

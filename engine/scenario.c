@@ -1,0 +1,996 @@
+/* Scenario loading: run the Lua file, read back the tables scripts/needlesim.lua built, and
+ * build the tissue with sim/ (see scenario.h).
+ *
+ * The Lua side has already validated every field and recorded where each table was written
+ * (`where`), so errors here are about what only C can know (a file that does not open, a mesh
+ * whose tags have no material, a shape function that fails while the mesher runs). Each one
+ * still names the `where` of the table it is about. Fields are read defensively anyway: a
+ * scenario can change a table after its constructor checked it. */
+#include "scenario.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#include <lauxlib.h>
+
+#include "mesh_io.h"
+#include "quality.h"
+#include "shape.h"
+
+#define WHERE_MAX 512
+/* CSG trees deeper than this are refused (a table that contains itself would recurse). */
+#define SHAPE_DEPTH_MAX 200
+
+typedef struct Builder Builder;
+
+/* A Lua function used as a shape: called by the mesher through ns_shape_callback. */
+typedef struct LuaShapeFn {
+    Builder *b;
+    int ref; /* registry ref to the function */
+} LuaShapeFn;
+
+struct Builder {
+    NsScenario *sc;
+    lua_State *L;
+    char *err;
+    int err_sz;
+    LuaShapeFn **fns; /* (nfns) every function shape made, freed after meshing */
+    int nfns, capfns;
+    bool fn_failed; /* a function shape failed; fn_err says how */
+    char fn_err[1024];
+    bool have_bounds; /* ns.tissue.shapes{bounds = ...} was given */
+    double blo[3], bhi[3];
+};
+
+static char *dup_string(const char *s)
+{
+    if (!s)
+        return NULL;
+    size_t n = strlen(s) + 1;
+    char *d = malloc(n);
+    if (d)
+        memcpy(d, s, n);
+    return d;
+}
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return 1e3 * (double)ts.tv_sec + 1e-6 * (double)ts.tv_nsec;
+}
+
+#if defined(__GNUC__)
+__attribute__((format(printf, 2, 3)))
+#endif
+static int
+fail(Builder *b, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(b->err, (size_t)b->err_sz, fmt, ap);
+    va_end(ap);
+    return -1;
+}
+
+/* ---- reading tables ------------------------------------------------------------------------ */
+
+/* The __ns_kind of the metatable of the value at idx ("shape", "material", ...), or "". */
+static const char *kind_of(lua_State *L, int idx, char *buf, size_t n)
+{
+    buf[0] = '\0';
+    if (lua_type(L, idx) != LUA_TTABLE || !lua_getmetatable(L, idx))
+        return buf;
+    if (lua_getfield(L, -1, "__ns_kind") == LUA_TSTRING)
+        snprintf(buf, n, "%s", lua_tostring(L, -1));
+    lua_pop(L, 2);
+    return buf;
+}
+
+static bool is_kind(lua_State *L, int idx, const char *kind)
+{
+    char buf[32];
+    return strcmp(kind_of(L, idx, buf, sizeof buf), kind) == 0;
+}
+
+/* The table's `where` ("file:line"), or the fallback. */
+static void get_where(lua_State *L, int idx, const char *fallback, char *out, size_t n)
+{
+    if (lua_getfield(L, idx, "where") == LUA_TSTRING)
+        snprintf(out, n, "%s", lua_tostring(L, -1));
+    else
+        snprintf(out, n, "%s", fallback);
+    lua_pop(L, 1);
+}
+
+static int get_string(Builder *b, int idx, const char *key, const char *where, const char *ctor,
+                      bool required, char **out)
+{
+    lua_State *L = b->L;
+    int t = lua_getfield(L, idx, key);
+    *out = NULL;
+    if (t == LUA_TNIL && !required) {
+        lua_pop(L, 1);
+        return 0;
+    }
+    if (t != LUA_TSTRING) {
+        lua_pop(L, 1);
+        return fail(b, "%s: %s: %s must be a string (got %s)", where, ctor, key,
+                    lua_typename(L, t));
+    }
+    *out = dup_string(lua_tostring(L, -1));
+    lua_pop(L, 1);
+    return *out ? 0 : fail(b, "%s: %s: out of memory", where, ctor);
+}
+
+static int get_number(Builder *b, int idx, const char *key, const char *where, const char *ctor,
+                      double *out)
+{
+    lua_State *L = b->L;
+    int t = lua_getfield(L, idx, key);
+    double x = lua_tonumber(L, -1);
+    lua_pop(L, 1);
+    if (t != LUA_TNUMBER || !isfinite(x))
+        return fail(b, "%s: %s: %s must be a finite number", where, ctor, key);
+    *out = x;
+    return 0;
+}
+
+/* A list of n finite numbers. */
+static int get_vector(Builder *b, int idx, const char *key, int n, const char *where,
+                      const char *ctor, double *out)
+{
+    lua_State *L = b->L;
+    if (lua_getfield(L, idx, key) != LUA_TTABLE) {
+        lua_pop(L, 1);
+        return fail(b, "%s: %s: %s must be a list of %d numbers", where, ctor, key, n);
+    }
+    for (int i = 0; i < n; i++) {
+        int t = lua_geti(L, -1, i + 1);
+        out[i] = lua_tonumber(L, -1);
+        lua_pop(L, 1);
+        if (t != LUA_TNUMBER || !isfinite(out[i])) {
+            lua_pop(L, 1);
+            return fail(b, "%s: %s: %s[%d] must be a finite number", where, ctor, key, i + 1);
+        }
+    }
+    lua_pop(L, 1);
+    return 0;
+}
+
+static bool get_bool(lua_State *L, int idx, const char *key)
+{
+    lua_getfield(L, idx, key);
+    bool v = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+    return v;
+}
+
+/* ---- materials ----------------------------------------------------------------------------- */
+
+const char *ns_material_model_name(NsMaterialModel m)
+{
+    return m == NS_MODEL_NEOHOOKEAN ? "neohookean" : "corotational";
+}
+
+static void material_free(NsMaterial *m)
+{
+    free(m->name);
+    m->name = NULL;
+}
+
+/* The material table at idx, used by the table described by (where, ctor). */
+static int material_from_lua(Builder *b, int idx, const char *where, const char *ctor,
+                             NsMaterial *m)
+{
+    lua_State *L = b->L;
+    memset(m, 0, sizeof *m);
+    idx = lua_absindex(L, idx);
+    if (!is_kind(L, idx, "material"))
+        return fail(b,
+                    "%s: %s: material must be a material (ns.material{...} or "
+                    "ns.materials.<name>)",
+                    where, ctor);
+    char mwhere[WHERE_MAX];
+    get_where(L, idx, where, mwhere, sizeof mwhere);
+    const char *mc = "ns.material";
+    if (get_string(b, idx, "name", mwhere, mc, true, &m->name) ||
+        get_number(b, idx, "youngs", mwhere, mc, &m->youngs) ||
+        get_number(b, idx, "poisson", mwhere, mc, &m->poisson) ||
+        get_number(b, idx, "density", mwhere, mc, &m->density) ||
+        get_number(b, idx, "damping", mwhere, mc, &m->damping) ||
+        get_number(b, idx, "friction", mwhere, mc, &m->friction) ||
+        get_number(b, idx, "cut_force", mwhere, mc, &m->cut_force))
+        return -1;
+    /* The same ranges the constructor checks (the table may have been changed since). */
+    const char *bad = NULL;
+    if (!(m->youngs > 0))
+        bad = "youngs must be > 0";
+    else if (!(m->poisson >= 0 && m->poisson < 0.5))
+        bad = "poisson must be in [0, 0.5)";
+    else if (!(m->density > 0))
+        bad = "density must be > 0";
+    else if (!(m->damping >= 0) || !(m->friction >= 0) || !(m->cut_force >= 0))
+        bad = "damping, friction and cut_force must be >= 0";
+    if (bad)
+        return fail(b, "%s: %s: %s", mwhere, mc, bad);
+    char *model = NULL;
+    if (get_string(b, idx, "model", mwhere, mc, false, &model))
+        return -1;
+    if (!model || strcmp(model, "corotational") == 0) {
+        m->model = NS_MODEL_COROTATIONAL;
+    } else if (strcmp(model, "neohookean") == 0) {
+        m->model = NS_MODEL_NEOHOOKEAN;
+    } else {
+        fail(b, "%s: %s: model must be 'corotational' or 'neohookean' (got '%s')", mwhere, mc,
+             model);
+        free(model);
+        return -1;
+    }
+    free(model);
+    int t = lua_getfield(L, idx, "membrane");
+    if (t == LUA_TTABLE) {
+        int mi = lua_gettop(L);
+        m->has_membrane = true;
+        int rc =
+            get_number(b, mi, "thickness", mwhere, "ns.material: membrane", &m->membrane_thickness);
+        if (rc == 0)
+            rc = get_number(b, mi, "cut_force", mwhere, "ns.material: membrane",
+                            &m->membrane_cut_force);
+        lua_pop(L, 1);
+        if (rc)
+            return -1;
+        if (!(m->membrane_thickness > 0) || !(m->membrane_cut_force >= 0))
+            return fail(b, "%s: ns.material: membrane: thickness must be > 0 and cut_force >= 0",
+                        mwhere);
+    } else {
+        lua_pop(L, 1);
+        if (t != LUA_TNIL)
+            return fail(b, "%s: ns.material: membrane must be a table {thickness, cut_force}",
+                        mwhere);
+    }
+    return 0;
+}
+
+/* ---- shapes -------------------------------------------------------------------------------- */
+
+/* ns_shape_callback's function for a Lua function shape: d = f(x, y, z). The first failure
+ * is kept in b->fn_err and every later call returns NaN at once, which stops the mesher. */
+static double lua_shape_eval(void *user, const double p[3])
+{
+    LuaShapeFn *f = user;
+    Builder *b = f->b;
+    if (b->fn_failed)
+        return NAN;
+    lua_State *L = b->L;
+    lua_rawgeti(L, LUA_REGISTRYINDEX, f->ref);
+    lua_pushnumber(L, p[0]);
+    lua_pushnumber(L, p[1]);
+    lua_pushnumber(L, p[2]);
+    if (ns_lua_call(b->sc->lua, 3, 1, b->fn_err, (int)sizeof b->fn_err) != 0) {
+        b->fn_failed = true;
+        return NAN;
+    }
+    int t = lua_type(L, -1);
+    double d = lua_tonumber(L, -1);
+    lua_pop(L, 1);
+    if (t == LUA_TNUMBER && isfinite(d))
+        return d;
+    char got[64];
+    if (t == LUA_TNUMBER)
+        snprintf(got, sizeof got, "%g", d);
+    else
+        snprintf(got, sizeof got, "%s", lua_typename(L, t));
+    lua_Debug ar;
+    lua_rawgeti(L, LUA_REGISTRYINDEX, f->ref);
+    lua_getinfo(L, ">S", &ar);
+    const char *src = ar.source[0] == '@' ? ar.source + 1 : ar.short_src;
+    snprintf(b->fn_err, sizeof b->fn_err,
+             "%s:%d: shape function returned %s at (%g, %g, %g) (expected a finite signed "
+             "distance in metres, negative inside)",
+             src, ar.linedefined, got, p[0], p[1], p[2]);
+    b->fn_failed = true;
+    return NAN;
+}
+
+static NsShape *function_shape(Builder *b, int idx, const char *where)
+{
+    lua_State *L = b->L;
+    if (b->nfns == b->capfns) {
+        int cap = b->capfns ? 2 * b->capfns : 8;
+        LuaShapeFn **fns = realloc(b->fns, (size_t)cap * sizeof *fns);
+        if (!fns) {
+            fail(b, "%s: out of memory", where);
+            return NULL;
+        }
+        b->fns = fns;
+        b->capfns = cap;
+    }
+    LuaShapeFn *f = malloc(sizeof *f);
+    if (!f) {
+        fail(b, "%s: out of memory", where);
+        return NULL;
+    }
+    f->b = b;
+    lua_pushvalue(L, idx);
+    f->ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    b->fns[b->nfns++] = f;
+    /* Without tissue bounds the function is unbounded; an enclosing intersection or
+     * difference may still bound it, and build_shapes checks the final bounds. */
+    double lo[3] = {-INFINITY, -INFINITY, -INFINITY}, hi[3] = {INFINITY, INFINITY, INFINITY};
+    NsShape *s = ns_shape_callback(lua_shape_eval, f, b->have_bounds ? b->blo : lo,
+                                   b->have_bounds ? b->bhi : hi);
+    if (!s)
+        fail(b, "%s: out of memory", where);
+    return s;
+}
+
+static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const char *ctx,
+                               int depth);
+
+/* Converts the list field `key` of the shape table at idx into shapes (count in *n). */
+static NsShape **shape_list(Builder *b, int idx, const char *key, const char *where,
+                            const char *ctor, int depth, int *n)
+{
+    lua_State *L = b->L;
+    *n = 0;
+    if (lua_getfield(L, idx, key) != LUA_TTABLE) {
+        lua_pop(L, 1);
+        fail(b, "%s: %s: %s must be a list of shapes", where, ctor, key);
+        return NULL;
+    }
+    int li = lua_gettop(L);
+    lua_Integer count = luaL_len(L, li);
+    if (count < 1 || count > 1000000) {
+        lua_pop(L, 1);
+        fail(b, "%s: %s: needs at least one shape", where, ctor);
+        return NULL;
+    }
+    NsShape **kids = calloc((size_t)count, sizeof *kids);
+    if (!kids) {
+        lua_pop(L, 1);
+        fail(b, "%s: out of memory", where);
+        return NULL;
+    }
+    for (lua_Integer i = 0; i < count; i++) {
+        lua_geti(L, li, i + 1);
+        kids[i] = shape_from_lua(b, -1, where, ctor, depth + 1);
+        lua_pop(L, 1);
+        if (!kids[i]) {
+            for (lua_Integer k = 0; k < i; k++)
+                ns_shape_release(kids[k]);
+            free(kids);
+            lua_pop(L, 1);
+            return NULL;
+        }
+    }
+    lua_pop(L, 1);
+    *n = (int)count;
+    return kids;
+}
+
+static NsShape *shape_field(Builder *b, int idx, const char *key, const char *where,
+                            const char *ctor, int depth)
+{
+    lua_getfield(b->L, idx, key);
+    NsShape *s = shape_from_lua(b, -1, where, ctor, depth + 1);
+    lua_pop(b->L, 1);
+    return s;
+}
+
+/* The shape (a table made by ns.shape.* or a Lua function) at idx, inside the table
+ * described by (ctx_where, ctx). Returns a new reference, or NULL with b->err set. */
+static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const char *ctx,
+                               int depth)
+{
+    lua_State *L = b->L;
+    idx = lua_absindex(L, idx);
+    if (depth > SHAPE_DEPTH_MAX) {
+        fail(b, "%s: %s: shapes nested more than %d deep (does a shape contain itself?)", ctx_where,
+             ctx, SHAPE_DEPTH_MAX);
+        return NULL;
+    }
+    if (!lua_checkstack(L, 8)) {
+        fail(b, "%s: %s: out of memory", ctx_where, ctx);
+        return NULL;
+    }
+    if (lua_type(L, idx) == LUA_TFUNCTION)
+        return function_shape(b, idx, ctx_where);
+    if (!is_kind(L, idx, "shape")) {
+        fail(b, "%s: %s: expected a shape (ns.shape.* or function(x, y, z)), got a %s", ctx_where,
+             ctx, luaL_typename(L, idx));
+        return NULL;
+    }
+    char where[WHERE_MAX], type[32];
+    get_where(L, idx, ctx_where, where, sizeof where);
+    if (lua_getfield(L, idx, "type") == LUA_TSTRING)
+        snprintf(type, sizeof type, "%s", lua_tostring(L, -1));
+    else
+        type[0] = '\0';
+    lua_pop(L, 1);
+    char ctor[48];
+    snprintf(ctor, sizeof ctor, "ns.shape.%s", type);
+
+    NsShape *s = NULL;
+    double c[3] = {0}, d[3] = {0}, r = 0;
+    if (strcmp(type, "sphere") == 0) {
+        if (get_vector(b, idx, "center", 3, where, ctor, c) ||
+            get_number(b, idx, "radius", where, ctor, &r))
+            return NULL;
+        if (!(r > 0)) {
+            fail(b, "%s: %s: radius must be > 0", where, ctor);
+            return NULL;
+        }
+        s = ns_shape_sphere(c, r);
+    } else if (strcmp(type, "ellipsoid") == 0 || strcmp(type, "box") == 0) {
+        bool box = type[0] == 'b';
+        const char *dk = box ? "size" : "radii";
+        if (get_vector(b, idx, "center", 3, where, ctor, c) ||
+            get_vector(b, idx, dk, 3, where, ctor, d))
+            return NULL;
+        if (!(d[0] > 0 && d[1] > 0 && d[2] > 0)) {
+            fail(b, "%s: %s: %s must be > 0", where, ctor, dk);
+            return NULL;
+        }
+        s = box ? ns_shape_box(c, d) : ns_shape_ellipsoid(c, d);
+    } else if (strcmp(type, "cylinder") == 0 || strcmp(type, "capsule") == 0) {
+        if (get_vector(b, idx, "a", 3, where, ctor, c) ||
+            get_vector(b, idx, "b", 3, where, ctor, d) ||
+            get_number(b, idx, "radius", where, ctor, &r))
+            return NULL;
+        if (!(r > 0)) {
+            fail(b, "%s: %s: radius must be > 0", where, ctor);
+            return NULL;
+        }
+        s = type[1] == 'y' ? ns_shape_cylinder(c, d, r) : ns_shape_capsule(c, d, r);
+    } else if (strcmp(type, "union") == 0 || strcmp(type, "intersection") == 0) {
+        int n;
+        NsShape **kids = shape_list(b, idx, "children", where, ctor, depth, &n);
+        if (!kids)
+            return NULL;
+        s = type[0] == 'u' ? ns_shape_union(kids, n) : ns_shape_intersection(kids, n);
+        for (int i = 0; i < n; i++)
+            ns_shape_release(kids[i]);
+        free(kids);
+    } else if (strcmp(type, "difference") == 0) {
+        NsShape *a = shape_field(b, idx, "a", where, ctor, depth);
+        if (!a)
+            return NULL;
+        NsShape *bb = shape_field(b, idx, "b", where, ctor, depth);
+        if (!bb) {
+            ns_shape_release(a);
+            return NULL;
+        }
+        s = ns_shape_difference(a, bb);
+        ns_shape_release(a);
+        ns_shape_release(bb);
+    } else if (strcmp(type, "transform") == 0) {
+        double rot[9] = {0}, t[3] = {0}, k = 0;
+        if (get_vector(b, idx, "rotation", 9, where, ctor, rot) ||
+            get_vector(b, idx, "translate", 3, where, ctor, t) ||
+            get_number(b, idx, "scale", where, ctor, &k))
+            return NULL;
+        if (!(k > 0)) {
+            fail(b, "%s: %s: scale must be > 0", where, ctor);
+            return NULL;
+        }
+        NsShape *child = shape_field(b, idx, "child", where, ctor, depth);
+        if (!child)
+            return NULL;
+        s = ns_shape_transform(child, rot, t, k);
+        ns_shape_release(child);
+    } else {
+        fail(b, "%s: unknown shape type '%s'", where, type);
+        return NULL;
+    }
+    if (!s)
+        fail(b, "%s: %s: out of memory", where, ctor);
+    return s;
+}
+
+/* ---- tissue -------------------------------------------------------------------------------- */
+
+static int alloc_regions(Builder *b, int n, const char *where)
+{
+    b->sc->regions = calloc((size_t)n, sizeof *b->sc->regions);
+    if (!b->sc->regions)
+        return fail(b, "%s: out of memory", where);
+    b->sc->region_count = n;
+    return 0;
+}
+
+/* Runs the mesher and turns its failure into one line naming the tissue: a function shape's
+ * own error first (it is why the mesher stopped), then the mesher's message. */
+static int run_mesher(Builder *b, const NsMesherDef *def, const char *where, const char *ctor)
+{
+    char merr[512];
+    NsScenario *sc = b->sc;
+    if (ns_mesher_stuff(def, &sc->mesh, &sc->mesher_stats, merr, (int)sizeof merr) != 0) {
+        if (b->fn_failed)
+            return fail(b, "%s", b->fn_err);
+        return fail(b, "%s: %s: resolution %g m: %s", where, ctor, def->spacing, merr);
+    }
+    if (b->fn_failed) /* a failure the mesher did not notice must not pass either */
+        return fail(b, "%s", b->fn_err);
+    sc->meshed = true;
+    return 0;
+}
+
+static const char *const face_names[6] = {"xmin", "xmax", "ymin", "ymax", "zmin", "zmax"};
+
+static int build_box(Builder *b, int ti, const char *where)
+{
+    lua_State *L = b->L;
+    NsScenario *sc = b->sc;
+    const char *ctor = "ns.tissue.box";
+    double size[3] = {0}, origin[3] = {0}, h = 0;
+    if (get_vector(b, ti, "size", 3, where, ctor, size) ||
+        get_vector(b, ti, "origin", 3, where, ctor, origin) ||
+        get_number(b, ti, "resolution", where, ctor, &h))
+        return -1;
+    if (!(size[0] > 0 && size[1] > 0 && size[2] > 0))
+        return fail(b, "%s: %s: size must be > 0", where, ctor);
+    if (!(h > 0))
+        return fail(b, "%s: %s: resolution must be > 0", where, ctor);
+    sc->resolution = h;
+    if (alloc_regions(b, 1, where))
+        return -1;
+    NsRegionInfo *reg = &sc->regions[0];
+    reg->name = dup_string("tissue");
+    reg->tag = 1;
+    lua_getfield(L, ti, "material");
+    int rc = material_from_lua(b, -1, where, ctor, &reg->material);
+    lua_pop(L, 1);
+    if (rc)
+        return -1;
+    if (!reg->name)
+        return fail(b, "%s: out of memory", where);
+
+    /* Which faces are held. */
+    bool fixed_face[6] = {false};
+    if (lua_getfield(L, ti, "fixed_faces") == LUA_TTABLE) {
+        lua_Integer n = luaL_len(L, -1);
+        for (lua_Integer i = 1; i <= n; i++) {
+            lua_geti(L, -1, i);
+            const char *f = lua_tostring(L, -1);
+            int k = 0;
+            while (k < 6 && !(f && strcmp(f, face_names[k]) == 0))
+                k++;
+            lua_pop(L, 1);
+            if (k == 6) {
+                lua_pop(L, 1);
+                return fail(b,
+                            "%s: %s: fixed_faces[%d] must be one of xmin, xmax, ymin, ymax, "
+                            "zmin, zmax",
+                            where, ctor, (int)i);
+            }
+            fixed_face[k] = true;
+        }
+    }
+    lua_pop(L, 1);
+
+    double center[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        center[a] = origin[a] + 0.5 * size[a];
+        hi[a] = origin[a] + size[a];
+    }
+    NsShape *shape = ns_shape_box(center, size);
+    if (!shape)
+        return fail(b, "%s: out of memory", where);
+    NsMesherRegion region = {.shape = shape, .fixed = false};
+    NsMesherDef def = ns_default_mesher_def();
+    def.spacing = h;
+    def.regions = &region;
+    def.region_count = 1;
+    /* Anchor the lattice at the min corner: the min faces lie on lattice planes and stay
+     * flat without warping. */
+    memcpy(def.lo, origin, sizeof def.lo);
+    memcpy(def.hi, hi, sizeof def.hi);
+    rc = run_mesher(b, &def, where, ctor);
+    ns_shape_release(shape);
+    if (rc)
+        return -1;
+
+    /* Hold the nodes on the fixed faces. The min faces are exact lattice planes; the max
+     * faces are found by bisection to ~h 2^-40, far inside this tolerance. */
+    double tol = 1e-6 * h;
+    NsMesh *m = &sc->mesh;
+    for (int v = 0; v < m->node_slots; v++) {
+        if (!ns_mesh_node_alive(m, v))
+            continue;
+        for (int k = 0; k < 6; k++) {
+            int axis = k / 2;
+            double plane = (k % 2) ? hi[axis] : origin[axis];
+            if (fixed_face[k] && fabs(m->u[3 * v + axis] - plane) <= tol)
+                m->flags[v] |= NS_NODE_FIXED;
+        }
+    }
+    return 0;
+}
+
+static int build_shapes(Builder *b, int ti, const char *where)
+{
+    lua_State *L = b->L;
+    NsScenario *sc = b->sc;
+    const char *ctor = "ns.tissue.shapes";
+    double h = 0;
+    if (get_number(b, ti, "resolution", where, ctor, &h))
+        return -1;
+    if (!(h > 0))
+        return fail(b, "%s: %s: resolution must be > 0", where, ctor);
+    sc->resolution = h;
+
+    if (lua_getfield(L, ti, "bounds") == LUA_TTABLE) {
+        int bi = lua_gettop(L);
+        lua_geti(L, bi, 1);
+        lua_geti(L, bi, 2);
+        b->have_bounds = lua_istable(L, -2) && lua_istable(L, -1);
+        for (int a = 0; b->have_bounds && a < 3; a++) {
+            lua_geti(L, -2, a + 1);
+            lua_geti(L, -2, a + 1);
+            b->blo[a] = lua_tonumber(L, -2);
+            b->bhi[a] = lua_tonumber(L, -1);
+            lua_pop(L, 2);
+            if (!(isfinite(b->blo[a]) && isfinite(b->bhi[a]) && b->blo[a] < b->bhi[a]))
+                b->have_bounds = false;
+        }
+        lua_pop(L, 2);
+        if (!b->have_bounds) {
+            lua_pop(L, 1);
+            return fail(b,
+                        "%s: %s: bounds must be {{x0, y0, z0}, {x1, y1, z1}} with x0 < x1, "
+                        "y0 < y1, z0 < z1",
+                        where, ctor);
+        }
+    }
+    lua_pop(L, 1);
+
+    if (lua_getfield(L, ti, "regions") != LUA_TTABLE) {
+        lua_pop(L, 1);
+        return fail(b, "%s: %s: regions must be a list of regions", where, ctor);
+    }
+    int ri = lua_gettop(L);
+    lua_Integer n = luaL_len(L, ri);
+    if (n < 1 || n > 65535) {
+        lua_pop(L, 1);
+        return fail(b, "%s: %s: regions must be a list of 1 to 65535 regions", where, ctor);
+    }
+    NsMesherRegion *mr = calloc((size_t)n, sizeof *mr);
+    if (!mr) {
+        lua_pop(L, 1);
+        return fail(b, "%s: out of memory", where);
+    }
+    if (alloc_regions(b, (int)n, where)) {
+        free(mr);
+        lua_pop(L, 1);
+        return -1;
+    }
+    int rc = 0;
+    for (lua_Integer i = 0; i < n && rc == 0; i++) {
+        char rctx[96];
+        snprintf(rctx, sizeof rctx, "%s: regions[%d]", ctor, (int)(i + 1));
+        lua_geti(L, ri, i + 1);
+        int gi = lua_gettop(L);
+        NsRegionInfo *reg = &sc->regions[i];
+        reg->tag = (int)i + 1;
+        if (!lua_istable(L, gi)) {
+            rc = fail(b, "%s: %s must be a table {name, shape, material, fixed}", where, rctx);
+        } else {
+            rc = get_string(b, gi, "name", where, rctx, true, &reg->name);
+            if (rc == 0) {
+                lua_getfield(L, gi, "material");
+                rc = material_from_lua(b, -1, where, rctx, &reg->material);
+                lua_pop(L, 1);
+            }
+            if (rc == 0) {
+                reg->fixed = get_bool(L, gi, "fixed");
+                mr[i].fixed = reg->fixed;
+                mr[i].shape = shape_field(b, gi, "shape", where, rctx, 0);
+                if (!mr[i].shape)
+                    rc = -1;
+            }
+            if (rc == 0) {
+                double lo[3], hi[3];
+                bool ok = ns_shape_bounds(mr[i].shape, lo, hi);
+                for (int a = 0; ok && a < 3; a++)
+                    ok = isfinite(lo[a]) && isfinite(hi[a]);
+                if (!ok && !b->have_bounds)
+                    rc = fail(b,
+                              "%s: %s: the extent of region '%s' is unknown (it uses a Lua "
+                              "function shape): give bounds = {{x0, y0, z0}, {x1, y1, z1}}",
+                              where, ctor, reg->name);
+            }
+        }
+        lua_pop(L, 1);
+    }
+    lua_pop(L, 1);
+
+    if (rc == 0) {
+        NsMesherDef def = ns_default_mesher_def();
+        def.spacing = h;
+        def.regions = mr;
+        def.region_count = (int)n;
+        if (b->have_bounds) {
+            memcpy(def.lo, b->blo, sizeof def.lo);
+            memcpy(def.hi, b->bhi, sizeof def.hi);
+        }
+        rc = run_mesher(b, &def, where, ctor);
+    }
+    for (lua_Integer i = 0; i < n; i++)
+        ns_shape_release((NsShape *)mr[i].shape);
+    free(mr);
+    return rc;
+}
+
+static int build_file(Builder *b, int ti, const char *where)
+{
+    lua_State *L = b->L;
+    NsScenario *sc = b->sc;
+    const char *ctor = "ns.tissue.file";
+    char *rel = NULL;
+    if (get_string(b, ti, "path", where, ctor, true, &rel))
+        return -1;
+    /* Relative paths are relative to the scenario's folder, not the working directory. */
+    const char *dir = ns_lua_scenario_dir(sc->lua);
+    size_t need = strlen(dir) + strlen(rel) + 2;
+    sc->mesh_path = malloc(need);
+    if (!sc->mesh_path) {
+        free(rel);
+        return fail(b, "%s: out of memory", where);
+    }
+    if (rel[0] == '/' || strcmp(dir, ".") == 0)
+        snprintf(sc->mesh_path, need, "%s", rel);
+    else
+        snprintf(sc->mesh_path, need, "%s/%s", dir, rel);
+    free(rel);
+
+    struct stat st;
+    if (stat(sc->mesh_path, &st) != 0)
+        return fail(b, "%s: %s: cannot open '%s': %s", where, ctor, sc->mesh_path, strerror(errno));
+    if (S_ISDIR(st.st_mode))
+        return fail(b, "%s: %s: cannot open '%s': Is a directory", where, ctor, sc->mesh_path);
+    char merr[512];
+    if (ns_mesh_read_msh(sc->mesh_path, &sc->mesh, merr, (int)sizeof merr) != 0)
+        return fail(b, "%s: %s: %s", where, ctor, merr);
+    NsMesh *m = &sc->mesh;
+    if (ns_mesh_compact(m) != 0)
+        return fail(b, "%s: out of memory", where);
+
+    /* Physical tags present (mesh region r is tag r + 1), in ascending order. */
+    int max_region = -1;
+    for (int t = 0; t < m->tet_slots; t++)
+        if (ns_mesh_tet_alive(m, t) && m->tet_region[t] > max_region)
+            max_region = m->tet_region[t];
+    if (max_region < 0)
+        return fail(b, "%s: %s: '%s' has no tetrahedra", where, ctor, sc->mesh_path);
+    int *remap = malloc((size_t)(max_region + 1) * sizeof *remap);
+    if (!remap)
+        return fail(b, "%s: out of memory", where);
+    for (int r = 0; r <= max_region; r++)
+        remap[r] = -1;
+    for (int t = 0; t < m->tet_slots; t++)
+        if (ns_mesh_tet_alive(m, t))
+            remap[m->tet_region[t]] = 0;
+    int count = 0;
+    for (int r = 0; r <= max_region; r++)
+        if (remap[r] == 0)
+            remap[r] = count++;
+    if (alloc_regions(b, count, where)) {
+        free(remap);
+        return -1;
+    }
+
+    lua_getfield(L, ti, "regions");
+    lua_getfield(L, ti, "names");
+    lua_getfield(L, ti, "fixed");
+    int regions_i = lua_gettop(L) - 2, names_i = regions_i + 1, fixed_i = regions_i + 2;
+    int rc = 0;
+    if (!lua_istable(L, regions_i))
+        rc = fail(b, "%s: %s: regions must be a table {[tag] = material, ...}", where, ctor);
+    for (int r = 0; r <= max_region && rc == 0; r++) {
+        if (remap[r] < 0)
+            continue;
+        int tag = r + 1;
+        NsRegionInfo *reg = &sc->regions[remap[r]];
+        reg->tag = tag;
+        char rctx[64];
+        snprintf(rctx, sizeof rctx, "%s: regions[%d]", ctor, tag);
+        if (lua_geti(L, regions_i, tag) == LUA_TNIL) {
+            rc = fail(b,
+                      "%s: %s: '%s' has tets with physical tag %d but regions has no entry "
+                      "for it (add [%d] = <material>)",
+                      where, ctor, sc->mesh_path, tag, tag);
+        } else {
+            rc = material_from_lua(b, -1, where, rctx, &reg->material);
+        }
+        lua_pop(L, 1);
+        if (rc)
+            break;
+        if (lua_istable(L, names_i) && lua_geti(L, names_i, tag) == LUA_TSTRING)
+            reg->name = dup_string(lua_tostring(L, -1));
+        else
+            reg->name = dup_string(reg->material.name);
+        if (lua_istable(L, names_i))
+            lua_pop(L, 1);
+        if (!reg->name)
+            rc = fail(b, "%s: out of memory", where);
+        if (lua_istable(L, fixed_i)) {
+            lua_geti(L, fixed_i, tag);
+            reg->fixed = lua_toboolean(L, -1);
+            lua_pop(L, 1);
+        }
+    }
+    lua_pop(L, 3);
+    if (rc == 0) {
+        for (int t = 0; t < m->tet_slots; t++) {
+            if (!ns_mesh_tet_alive(m, t))
+                continue;
+            int r = remap[m->tet_region[t]];
+            m->tet_region[t] = r;
+            if (sc->regions[r].fixed)
+                for (int k = 0; k < 4; k++)
+                    m->flags[m->tet_node[4 * t + k]] |= NS_NODE_FIXED;
+        }
+    }
+    free(remap);
+    return rc;
+}
+
+/* Per-region counts and volumes, fixed-node count. */
+static void region_stats(NsScenario *sc)
+{
+    const NsMesh *m = &sc->mesh;
+    for (int t = 0; t < m->tet_slots; t++) {
+        if (!ns_mesh_tet_alive(m, t))
+            continue;
+        const int *v = &m->tet_node[4 * t];
+        NsRegionInfo *reg = &sc->regions[m->tet_region[t]];
+        reg->tets++;
+        reg->volume_m3 +=
+            ns_tet_volume(&m->u[3 * v[0]], &m->u[3 * v[1]], &m->u[3 * v[2]], &m->u[3 * v[3]]);
+    }
+    sc->fixed_nodes = 0;
+    for (int v = 0; v < m->node_slots; v++)
+        if (ns_mesh_node_alive(m, v) && (m->flags[v] & NS_NODE_FIXED))
+            sc->fixed_nodes++;
+}
+
+static int build_tissue(Builder *b, int si)
+{
+    lua_State *L = b->L;
+    NsScenario *sc = b->sc;
+    lua_getfield(L, si, "tissue");
+    int ti = lua_gettop(L);
+    if (!is_kind(L, ti, "tissue")) {
+        lua_pop(L, 1);
+        return fail(b,
+                    "%s: ns.scenario: tissue must be ns.tissue.box{...}, ns.tissue.shapes{...} "
+                    "or ns.tissue.file{...}",
+                    sc->where);
+    }
+    char where[WHERE_MAX], type[16] = "";
+    get_where(L, ti, sc->where, where, sizeof where);
+    sc->tissue_where = dup_string(where);
+    if (lua_getfield(L, ti, "type") == LUA_TSTRING)
+        snprintf(type, sizeof type, "%s", lua_tostring(L, -1));
+    lua_pop(L, 1);
+    int rc;
+    if (strcmp(type, "box") == 0) {
+        sc->tissue_kind = NS_TISSUE_BOX;
+        rc = build_box(b, ti, where);
+    } else if (strcmp(type, "shapes") == 0) {
+        sc->tissue_kind = NS_TISSUE_SHAPES;
+        rc = build_shapes(b, ti, where);
+    } else if (strcmp(type, "file") == 0) {
+        sc->tissue_kind = NS_TISSUE_FILE;
+        rc = build_file(b, ti, where);
+    } else {
+        rc = fail(b, "%s: unknown tissue type '%s'", where, type);
+    }
+    lua_pop(L, 1);
+    if (rc == 0)
+        region_stats(sc);
+    return rc;
+}
+
+/* ---- load / free --------------------------------------------------------------------------- */
+
+int ns_scenario_load(const char *path, NsScenario *sc, char *err, int err_sz)
+{
+    double t0 = now_ms();
+    memset(sc, 0, sizeof *sc);
+    ns_mesh_init(&sc->mesh);
+    sc->table_ref = LUA_NOREF;
+    Builder b = {.sc = sc, .err = err, .err_sz = err_sz};
+    int rc = 0;
+
+    sc->path = dup_string(path);
+    sc->lua = ns_lua_open(path, err, err_sz);
+    if (!sc->path || !sc->lua) {
+        if (sc->lua)
+            fail(&b, "needlesim: out of memory");
+        ns_scenario_free(sc);
+        return -1;
+    }
+    lua_State *L = ns_lua_state(sc->lua);
+    b.L = L;
+    if (ns_lua_run_scenario(sc->lua, path, err, err_sz) != 0) {
+        ns_scenario_free(sc);
+        return -1;
+    }
+    int si = lua_gettop(L);
+    if (!is_kind(L, si, "scenario")) {
+        rc = fail(&b, "%s: the scenario file must return ns.scenario{...} (it returned %s)", path,
+                  lua_isnil(L, si)     ? "nothing"
+                  : lua_istable(L, si) ? "a plain table: wrap it in ns.scenario{...}"
+                                       : luaL_typename(L, si));
+    }
+    if (rc == 0) {
+        char where[WHERE_MAX];
+        get_where(L, si, path, where, sizeof where);
+        sc->where = dup_string(where);
+        rc = get_string(&b, si, "name", where, "ns.scenario", true, &sc->name);
+    }
+    if (rc == 0)
+        rc = get_string(&b, si, "description", sc->where, "ns.scenario", false, &sc->description);
+    if (rc == 0)
+        rc = build_tissue(&b, si);
+
+    /* Function shapes are not needed after meshing (later stages will keep their own). */
+    for (int i = 0; i < b.nfns; i++) {
+        luaL_unref(L, LUA_REGISTRYINDEX, b.fns[i]->ref);
+        free(b.fns[i]);
+    }
+    free(b.fns);
+
+    if (rc != 0) {
+        ns_scenario_free(sc);
+        return -1;
+    }
+    lua_pushvalue(L, si);
+    sc->table_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    lua_settop(L, si - 1);
+    sc->build_ms = now_ms() - t0;
+    return 0;
+}
+
+void ns_scenario_free(NsScenario *sc)
+{
+    if (!sc)
+        return;
+    if (sc->lua && sc->table_ref != LUA_NOREF)
+        luaL_unref(ns_lua_state(sc->lua), LUA_REGISTRYINDEX, sc->table_ref);
+    ns_lua_close(sc->lua);
+    ns_mesh_free(&sc->mesh);
+    for (int i = 0; i < sc->region_count; i++) {
+        free(sc->regions[i].name);
+        material_free(&sc->regions[i].material);
+    }
+    free(sc->regions);
+    free(sc->path);
+    free(sc->name);
+    free(sc->description);
+    free(sc->where);
+    free(sc->tissue_where);
+    free(sc->mesh_path);
+    memset(sc, 0, sizeof *sc);
+    ns_mesh_init(&sc->mesh);
+    sc->table_ref = LUA_NOREF;
+}
+
+const char **ns_scenario_region_names(const NsScenario *sc)
+{
+    const char **names =
+        malloc((size_t)(sc->region_count > 0 ? sc->region_count : 1) * sizeof *names);
+    if (!names)
+        return NULL;
+    for (int i = 0; i < sc->region_count; i++)
+        names[i] = sc->regions[i].name;
+    return names;
+}

@@ -1,0 +1,832 @@
+-- needlesim: the scenario API (docs/scenarios.md is the reference).
+--
+--   local ns = require "needlesim"
+--   return ns.scenario{ name = "...", tissue = ns.tissue.box{ ... } }
+--
+-- Every constructor checks its table of fields and returns a new, tagged table that the
+-- engine (engine/scenario.c) reads back. Typos must not pass silently: an unknown field, a
+-- missing one or a value out of range is an error that names the scenario's file:line (where
+-- the constructor was called), the constructor and the field, e.g.
+--   scenarios/x.lua:7: ns.tissue.box: resolution must be a number > 0 (got -0.004)
+-- Each table also keeps that place as `where`, so the engine can name it in errors it finds
+-- later (a mesh file that does not open, a shape function that fails while meshing).
+--
+-- Units are SI throughout: metres, kilograms, seconds, pascals, newtons.
+
+local where_of = __ns_where -- provided by the engine: "file:line" `level` frames up
+local fmt, concat, sort = string.format, table.concat, table.sort
+local huge, type, pairs, ipairs, select = math.huge, type, pairs, ipairs, select
+local tostring, setmetatable, getmetatable, rawget, error = tostring, setmetatable,
+    getmetatable, rawget, error
+
+local ns = {}
+
+-- Kinds ------------------------------------------------------------------------------------
+-- A table's kind lives in its metatable (`__ns_kind`), where the engine looks for it.
+
+local function make_kind(kind, label)
+    return {
+        __ns_kind = kind,
+        __name = "ns." .. kind,
+        __tostring = function(t)
+            return fmt("%s (%s)", label(t), rawget(t, "where") or "?")
+        end,
+    }
+end
+
+local SHAPE = make_kind("shape", function(t) return "ns.shape." .. tostring(t.type) end)
+local MATERIAL = make_kind("material", function(t) return fmt("ns.material '%s'", t.name) end)
+local TISSUE = make_kind("tissue", function(t) return "ns.tissue." .. tostring(t.type) end)
+local SCENARIO = make_kind("scenario", function(t) return fmt("ns.scenario '%s'", t.name) end)
+
+local function kind_of(v)
+    if type(v) ~= "table" then
+        return nil
+    end
+    local mt = getmetatable(v)
+    return type(mt) == "table" and rawget(mt, "__ns_kind") or nil
+end
+
+--- The kind of a needlesim table ("shape", "material", "tissue", "scenario"), or nil.
+function ns.kind(v)
+    return kind_of(v)
+end
+
+-- Messages ---------------------------------------------------------------------------------
+
+local function is_finite(x)
+    return type(x) == "number" and x == x and x > -huge and x < huge
+end
+
+-- A short, one-line description of a value for "(got ...)".
+local function describe(v)
+    local t = type(v)
+    if t == "number" then
+        if v ~= v then
+            return "nan"
+        end
+        return tostring(v)
+    elseif t == "string" then
+        local s = v:gsub("%c", "?")
+        if #s > 40 then
+            s = s:sub(1, 37) .. "..."
+        end
+        return "'" .. s .. "'"
+    elseif t == "table" then
+        local k = kind_of(v)
+        if k then
+            return k == "shape" and ("ns.shape." .. tostring(v.type)) or ("a " .. k)
+        end
+        local n = #v
+        if n >= 1 and n <= 9 then
+            local parts = {}
+            for i = 1, n do
+                local x = v[i]
+                if type(x) == "number" or type(x) == "string" then
+                    parts[i] = describe(x)
+                else
+                    parts[i] = type(x)
+                end
+            end
+            return "{" .. concat(parts, ", ") .. "}"
+        end
+        return "a table"
+    elseif t == "nil" or t == "boolean" then
+        return tostring(v)
+    end
+    return "a " .. t
+end
+
+local function raise(where, ctor, msg)
+    error(where .. ": " .. ctor .. ": " .. msg, 0)
+end
+
+-- Edit distance, for "did you mean ...?" on a misspelt field.
+local function distance(a, b)
+    local prev = {}
+    for j = 0, #b do
+        prev[j] = j
+    end
+    for i = 1, #a do
+        local cur = { [0] = i }
+        for j = 1, #b do
+            local cost = a:sub(i, i) == b:sub(j, j) and 0 or 1
+            cur[j] = math.min(prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + cost)
+        end
+        prev = cur
+    end
+    return prev[#b]
+end
+
+local function suggestion(name, known)
+    local best, best_d = nil, huge
+    for _, k in ipairs(known) do
+        local d = distance(name:lower(), k:lower())
+        if d < best_d then
+            best, best_d = k, d
+        end
+    end
+    if best and best_d <= math.max(2, #name // 3) then
+        return fmt("; did you mean '%s'?", best)
+    end
+    return ""
+end
+
+-- Argument tables --------------------------------------------------------------------------
+-- args(t, ctor, where, known) checks that t is a plain table whose keys are all in `known`
+-- and returns a reader with typed accessors; each raises at `where` with `ctor` in front.
+
+local Args = {}
+Args.__index = Args
+
+local OPTIONAL = {} -- a default that means "absent is fine, give nil"
+
+local function key_order(a, b)
+    local ta, tb = type(a), type(b)
+    if ta ~= tb then
+        return ta < tb
+    end
+    if ta == "string" or ta == "number" then
+        return a < b
+    end
+    return tostring(a) < tostring(b)
+end
+
+local function args(t, ctor, where, known)
+    if type(t) ~= "table" or kind_of(t) then
+        raise(where, ctor, fmt("expected a table of fields {%s} (got %s)", concat(known, ", "),
+            describe(t)))
+    end
+    local set = {}
+    for _, k in ipairs(known) do
+        set[k] = true
+    end
+    local unknown = {}
+    for k in pairs(t) do
+        if not set[k] then
+            unknown[#unknown + 1] = k
+        end
+    end
+    if #unknown > 0 then
+        sort(unknown, key_order) -- deterministic whatever the hash order
+        local k = unknown[#unknown] -- strings sort after numbers: name a misspelt field first
+        for _, u in ipairs(unknown) do
+            if type(u) == "string" then
+                k = u
+                break
+            end
+        end
+        if type(k) ~= "string" then
+            raise(where, ctor, fmt("unexpected positional value [%s] = %s (fields are named: %s)",
+                tostring(k), describe(t[k]), concat(known, ", ")))
+        end
+        local more = ""
+        if #unknown > 1 then
+            more = fmt(" (and %d more unknown)", #unknown - 1)
+        end
+        raise(where, ctor, fmt("unknown field '%s'%s (known: %s)%s", k, more,
+            concat(known, ", "), suggestion(k, known)))
+    end
+    return setmetatable({ t = t, ctor = ctor, where = where }, Args)
+end
+
+function Args:fail(msg, ...)
+    raise(self.where, self.ctor, fmt(msg, ...))
+end
+
+function Args:get(k)
+    return self.t[k]
+end
+
+local function GT0(x) return x > 0 end
+local function GE0(x) return x >= 0 end
+local function ANY() return true end
+
+-- A number field; `test`/`what` say which numbers are allowed ("> 0").
+function Args:number(k, test, what, default)
+    local v = self.t[k]
+    if v == nil then
+        if default == OPTIONAL then
+            return nil
+        elseif default ~= nil then
+            return default
+        end
+        self:fail("missing required field '%s' (a number %s)", k, what)
+    end
+    if not is_finite(v) or not test(v) then
+        self:fail("%s must be a number %s (got %s)", k, what, describe(v))
+    end
+    return v
+end
+
+-- A list of n finite numbers, each passing `test`; returns a fresh copy.
+local function vector(v, n, test)
+    if type(v) ~= "table" or kind_of(v) then
+        return nil
+    end
+    local count = 0
+    for _ in pairs(v) do
+        count = count + 1
+    end
+    if count ~= n then
+        return nil
+    end
+    local out = {}
+    for i = 1, n do
+        local x = v[i]
+        if not is_finite(x) or not test(x) then
+            return nil
+        end
+        out[i] = x
+    end
+    return out
+end
+
+function Args:vec3(k, test, what, default)
+    local v = self.t[k]
+    if v == nil then
+        if default == OPTIONAL then
+            return nil
+        elseif default ~= nil then
+            return { default[1], default[2], default[3] }
+        end
+        self:fail("missing required field '%s' ({x, y, z}: 3 numbers%s)", k, what)
+    end
+    local out = vector(v, 3, test)
+    if not out then
+        self:fail("%s must be {x, y, z}: 3 numbers%s (got %s)", k, what, describe(v))
+    end
+    return out
+end
+
+function Args:string(k, default)
+    local v = self.t[k]
+    if v == nil then
+        if default == OPTIONAL then
+            return nil
+        elseif default ~= nil then
+            return default
+        end
+        self:fail("missing required field '%s' (a string)", k)
+    end
+    if type(v) ~= "string" or v == "" then
+        self:fail("%s must be a non-empty string (got %s)", k, describe(v))
+    end
+    return v
+end
+
+function Args:boolean(k, default)
+    local v = self.t[k]
+    if v == nil then
+        return default
+    end
+    if type(v) ~= "boolean" then
+        self:fail("%s must be true or false (got %s)", k, describe(v))
+    end
+    return v
+end
+
+function Args:choice(k, choices, default)
+    local v = self.t[k]
+    if v == nil then
+        return default
+    end
+    for _, c in ipairs(choices) do
+        if v == c then
+            return v
+        end
+    end
+    self:fail("%s must be one of '%s' (got %s)", k, concat(choices, "', '"), describe(v))
+end
+
+function Args:func(k)
+    local v = self.t[k]
+    if v ~= nil and type(v) ~= "function" then
+        self:fail("%s must be a function (got %s)", k, describe(v))
+    end
+    return v
+end
+
+local function material_hint(v)
+    if type(v) == "string" then
+        return fmt("; did you mean ns.materials.%s?", v)
+    end
+    return ""
+end
+
+function Args:material(k)
+    local v = self.t[k]
+    if v == nil then
+        self:fail("missing required field '%s' (ns.material{...} or ns.materials.<name>)", k)
+    end
+    if kind_of(v) ~= "material" then
+        self:fail("%s must be a material, ns.material{...} or ns.materials.<name> (got %s)%s", k,
+            describe(v), material_hint(v))
+    end
+    return v
+end
+
+local function is_shape(v)
+    return type(v) == "function" or kind_of(v) == "shape"
+end
+
+function Args:shape(k)
+    local v = self.t[k]
+    if v == nil then
+        self:fail("missing required field '%s' (ns.shape.* or function(x, y, z))", k)
+    end
+    if not is_shape(v) then
+        self:fail("%s must be a shape, ns.shape.* or function(x, y, z) (got %s)", k, describe(v))
+    end
+    return v
+end
+
+local function new(mt, t)
+    return setmetatable(t, mt)
+end
+
+-- Materials --------------------------------------------------------------------------------
+
+local MATERIAL_FIELDS = { "name", "youngs", "poisson", "density", "damping", "friction",
+    "cut_force", "model", "membrane", "base" }
+local MEMBRANE_FIELDS = { "thickness", "cut_force" }
+
+--- ns.material{name, youngs, poisson, density, damping, friction, cut_force, model,
+---             membrane = {thickness, cut_force}, base}
+-- With `base` (another material) every field not given is taken from it.
+function ns.material(t)
+    local where = where_of(2)
+    local a = args(t, "ns.material", where, MATERIAL_FIELDS)
+    local base = t.base
+    if base ~= nil and kind_of(base) ~= "material" then
+        a:fail("base must be a material (got %s)%s", describe(base), material_hint(base))
+    end
+    if base then
+        -- Read through to the base for fields not given here.
+        local merged = {}
+        for _, k in ipairs(MATERIAL_FIELDS) do
+            if k ~= "base" then
+                local v = t[k]
+                if v == nil then
+                    v = base[k]
+                end
+                merged[k] = v
+            end
+        end
+        a.t = merged
+    end
+    local m = {
+        name = a:string("name"),
+        youngs = a:number("youngs", GT0, "> 0 [Pa]"),
+        poisson = a:number("poisson", function(x) return x >= 0 and x < 0.5 end,
+            "in [0, 0.5)"),
+        density = a:number("density", GT0, "> 0 [kg/m^3]"),
+        damping = a:number("damping", GE0, ">= 0 [Pa s]", 0),
+        friction = a:number("friction", GE0, ">= 0 [N/m]", 0),
+        cut_force = a:number("cut_force", GE0, ">= 0 [N]", 0),
+        model = a:choice("model", { "corotational", "neohookean" }, "corotational"),
+        where = where,
+    }
+    local mem = a.t.membrane
+    if mem ~= nil then
+        local ma = args(mem, "ns.material: membrane", where, MEMBRANE_FIELDS)
+        m.membrane = {
+            thickness = ma:number("thickness", GT0, "> 0 [m]"),
+            cut_force = ma:number("cut_force", GE0, ">= 0 [N]"),
+        }
+    end
+    return new(MATERIAL, m)
+end
+
+-- ns.materials is scripts/needlesim/materials.lua, loaded on first use (it requires this
+-- module, so it cannot be loaded while this one is).
+setmetatable(ns, {
+    __index = function(t, k)
+        if k == "materials" then
+            local m = require "needlesim.materials"
+            rawset(t, "materials", m)
+            return m
+        end
+        return nil
+    end,
+})
+
+-- Shapes -----------------------------------------------------------------------------------
+-- Signed distance, negative inside, in metres. A plain Lua function(x, y, z) returning the
+-- signed distance is accepted anywhere a shape is.
+
+ns.shape = {}
+
+local function shape(t)
+    return new(SHAPE, t)
+end
+
+--- ns.shape.sphere{center, radius}
+function ns.shape.sphere(t)
+    local where = where_of(2)
+    local a = args(t, "ns.shape.sphere", where, { "center", "radius" })
+    return shape { type = "sphere", center = a:vec3("center", ANY, ""),
+        radius = a:number("radius", GT0, "> 0 [m]"), where = where }
+end
+
+--- ns.shape.ellipsoid{center, radii}
+function ns.shape.ellipsoid(t)
+    local where = where_of(2)
+    local a = args(t, "ns.shape.ellipsoid", where, { "center", "radii" })
+    return shape { type = "ellipsoid", center = a:vec3("center", ANY, ""),
+        radii = a:vec3("radii", GT0, " > 0 [m]"), where = where }
+end
+
+--- ns.shape.box{center, size}  (axis-aligned; rotate it with ns.shape.rotate)
+function ns.shape.box(t)
+    local where = where_of(2)
+    local a = args(t, "ns.shape.box", where, { "center", "size" })
+    return shape { type = "box", center = a:vec3("center", ANY, ""),
+        size = a:vec3("size", GT0, " > 0 [m]"), where = where }
+end
+
+local function segment_shape(kind, t, where, distinct)
+    local ctor = "ns.shape." .. kind
+    local a = args(t, ctor, where, { "a", "b", "radius" })
+    local p, q = a:vec3("a", ANY, ""), a:vec3("b", ANY, "")
+    if distinct and p[1] == q[1] and p[2] == q[2] and p[3] == q[3] then
+        a:fail("a and b must differ (the axis runs from a to b)")
+    end
+    return shape { type = kind, a = p, b = q, radius = a:number("radius", GT0, "> 0 [m]"),
+        where = where }
+end
+
+--- ns.shape.cylinder{a, b, radius}: flat-capped, between the centres a and b of its ends
+function ns.shape.cylinder(t)
+    return segment_shape("cylinder", t, where_of(2), true)
+end
+
+--- ns.shape.capsule{a, b, radius}: the points within radius of the segment ab
+function ns.shape.capsule(t)
+    return segment_shape("capsule", t, where_of(2), false)
+end
+
+local function shape_list(ctor, where, min, ...)
+    local n = select("#", ...)
+    if n < min then
+        raise(where, ctor, fmt("needs at least %d shape%s (got %d)", min, min > 1 and "s" or "",
+            n))
+    end
+    local list = {}
+    for i = 1, n do
+        local s = select(i, ...)
+        if not is_shape(s) then
+            raise(where, ctor, fmt("argument %d must be a shape, ns.shape.* or function(x, y, z) "
+                .. "(got %s)", i, describe(s)))
+        end
+        list[i] = s
+    end
+    return list
+end
+
+--- ns.shape.union(s1, s2, ...): inside any of them
+function ns.shape.union(...)
+    local where = where_of(2)
+    return shape { type = "union", children = shape_list("ns.shape.union", where, 1, ...),
+        where = where }
+end
+
+--- ns.shape.intersection(s1, s2, ...): inside all of them
+function ns.shape.intersection(...)
+    local where = where_of(2)
+    return shape { type = "intersection",
+        children = shape_list("ns.shape.intersection", where, 1, ...), where = where }
+end
+
+--- ns.shape.difference(a, b): inside a and outside b
+function ns.shape.difference(...)
+    local where = where_of(2)
+    if select("#", ...) ~= 2 then
+        raise(where, "ns.shape.difference", fmt("takes exactly 2 shapes, a and b (got %d)",
+            select("#", ...)))
+    end
+    local l = shape_list("ns.shape.difference", where, 2, ...)
+    return shape { type = "difference", a = l[1], b = l[2], where = where }
+end
+
+-- Transforms: p = translate + scale * R q maps the child's point q to the world. Chained
+-- transforms compose into one node.
+local IDENTITY = { 1, 0, 0, 0, 1, 0, 0, 0, 1 }
+
+local function matmul(A, B)
+    local C = {}
+    for i = 0, 2 do
+        for j = 0, 2 do
+            C[3 * i + j + 1] = A[3 * i + 1] * B[j + 1] + A[3 * i + 2] * B[3 + j + 1]
+                + A[3 * i + 3] * B[6 + j + 1]
+        end
+    end
+    return C
+end
+
+local function matvec(A, v)
+    return { A[1] * v[1] + A[2] * v[2] + A[3] * v[3], A[4] * v[1] + A[5] * v[2] + A[6] * v[3],
+        A[7] * v[1] + A[8] * v[2] + A[9] * v[3] }
+end
+
+-- Applies (R, t, k) after the shape s (a transform node if s is one already).
+local function transform(s, R, t, k, where)
+    local child, R0, t0, k0 = s, IDENTITY, { 0, 0, 0 }, 1
+    if kind_of(s) == "shape" and s.type == "transform" then
+        child, R0, t0, k0 = s.child, s.rotation, s.translate, s.scale
+    end
+    -- p = t + k R (t0 + k0 R0 q) = (t + k R t0) + (k k0) (R R0) q
+    local Rt0 = matvec(R, t0)
+    return shape { type = "transform", child = child, rotation = matmul(R, R0),
+        translate = { t[1] + k * Rt0[1], t[2] + k * Rt0[2], t[3] + k * Rt0[3] },
+        scale = k * k0, where = where }
+end
+
+local function check_shape_arg(ctor, where, s)
+    if not is_shape(s) then
+        raise(where, ctor, fmt("argument 1 must be a shape, ns.shape.* or function(x, y, z) "
+            .. "(got %s)", describe(s)))
+    end
+end
+
+--- ns.shape.translate(s, {dx, dy, dz})
+function ns.shape.translate(s, d)
+    local where = where_of(2)
+    check_shape_arg("ns.shape.translate", where, s)
+    local v = vector(d, 3, ANY)
+    if not v then
+        raise(where, "ns.shape.translate", fmt("argument 2 must be {dx, dy, dz}: 3 numbers "
+            .. "(got %s)", describe(d)))
+    end
+    return transform(s, IDENTITY, v, 1, where)
+end
+
+--- ns.shape.rotate(s, axis, angle): about an axis through the origin; axis is {x, y, z} or
+--- "x", "y", "z"; angle in radians, right-handed
+function ns.shape.rotate(s, axis, angle)
+    local where = where_of(2)
+    local ctor = "ns.shape.rotate"
+    check_shape_arg(ctor, where, s)
+    local named = { x = { 1, 0, 0 }, y = { 0, 1, 0 }, z = { 0, 0, 1 } }
+    local u = named[axis] or vector(axis, 3, ANY)
+    local len = u and math.sqrt(u[1] * u[1] + u[2] * u[2] + u[3] * u[3]) or 0
+    if not (len > 0) or not is_finite(len) then
+        raise(where, ctor, fmt("argument 2 (axis) must be \"x\", \"y\", \"z\" or a non-zero "
+            .. "{x, y, z} (got %s)", describe(axis)))
+    end
+    if not is_finite(angle) then
+        raise(where, ctor, fmt("argument 3 (angle) must be a number in radians (got %s)",
+            describe(angle)))
+    end
+    local x, y, z = u[1] / len, u[2] / len, u[3] / len
+    local c, sn = math.cos(angle), math.sin(angle)
+    local C = 1 - c
+    -- Rodrigues: R = c I + s [u]x + (1 - c) u u^T
+    local R = {
+        c + x * x * C, x * y * C - z * sn, x * z * C + y * sn,
+        y * x * C + z * sn, c + y * y * C, y * z * C - x * sn,
+        z * x * C - y * sn, z * y * C + x * sn, c + z * z * C,
+    }
+    return transform(s, R, { 0, 0, 0 }, 1, where)
+end
+
+--- ns.shape.scale(s, k): uniform scaling about the origin, k > 0
+function ns.shape.scale(s, k)
+    local where = where_of(2)
+    check_shape_arg("ns.shape.scale", where, s)
+    if not is_finite(k) or not (k > 0) then
+        raise(where, "ns.shape.scale", fmt("argument 2 (factor) must be a number > 0 (got %s)",
+            describe(k)))
+    end
+    return transform(s, IDENTITY, { 0, 0, 0 }, k, where)
+end
+
+-- Tissue -----------------------------------------------------------------------------------
+
+ns.tissue = {}
+
+local FACES = { "xmin", "xmax", "ymin", "ymax", "zmin", "zmax" }
+
+--- ns.tissue.box{size, resolution, material, origin = {0, 0, 0}, fixed_faces}
+-- The box spans origin .. origin + size. fixed_faces: list of "xmin", "xmax", ..., "zmax";
+-- the nodes on those faces are held in place.
+function ns.tissue.box(t)
+    local where = where_of(2)
+    local a = args(t, "ns.tissue.box", where,
+        { "size", "resolution", "material", "origin", "fixed_faces" })
+    local box = {
+        type = "box",
+        size = a:vec3("size", GT0, " > 0 [m]"),
+        resolution = a:number("resolution", GT0, "> 0 [m]"),
+        material = a:material("material"),
+        origin = a:vec3("origin", ANY, "", { 0, 0, 0 }),
+        fixed_faces = {},
+        where = where,
+    }
+    local faces = t.fixed_faces
+    if faces ~= nil then
+        if type(faces) ~= "table" or kind_of(faces) then
+            a:fail("fixed_faces must be a list of face names (got %s)", describe(faces))
+        end
+        local seen = {}
+        for k, f in pairs(faces) do
+            if math.type(k) ~= "integer" or k < 1 or k > #faces then
+                a:fail("fixed_faces must be a list like {\"xmin\", \"zmin\"} (got key %s)",
+                    describe(k))
+            end
+        end
+        for i, f in ipairs(faces) do
+            local ok = false
+            for _, name in ipairs(FACES) do
+                ok = ok or f == name
+            end
+            if not ok then
+                a:fail("fixed_faces[%d] must be one of '%s' (got %s)", i, concat(FACES, "', '"),
+                    describe(f))
+            end
+            if seen[f] then
+                a:fail("fixed_faces lists '%s' twice", f)
+            end
+            seen[f] = true
+            box.fixed_faces[i] = f
+        end
+    end
+    return new(TISSUE, box)
+end
+
+local function check_bounds(a, v)
+    if v == nil then
+        return nil
+    end
+    local lo = type(v) == "table" and not kind_of(v) and vector(v[1], 3, ANY)
+    local hi = type(v) == "table" and not kind_of(v) and vector(v[2], 3, ANY)
+    local ok = lo and hi and #v == 2
+    if ok then
+        for i = 1, 3 do
+            ok = ok and lo[i] < hi[i]
+        end
+    end
+    if not ok then
+        a:fail("bounds must be {{x0, y0, z0}, {x1, y1, z1}} with x0 < x1, y0 < y1, z0 < z1 "
+            .. "(got %s)", describe(v))
+    end
+    return { lo, hi }
+end
+
+--- ns.tissue.shapes{resolution, regions = {{name, shape, material, fixed}, ...}, bounds}
+-- Later regions override earlier ones where they overlap. bounds = {{x0,y0,z0},{x1,y1,z1}}
+-- is the lattice box (the lattice is anchored at its min corner); it is required when a
+-- region's shape is a Lua function, whose extent the mesher cannot know.
+function ns.tissue.shapes(t)
+    local where = where_of(2)
+    local ctor = "ns.tissue.shapes"
+    local a = args(t, ctor, where, { "resolution", "regions", "bounds" })
+    local tissue = {
+        type = "shapes",
+        resolution = a:number("resolution", GT0, "> 0 [m]"),
+        bounds = check_bounds(a, t.bounds),
+        regions = {},
+        where = where,
+    }
+    local regions = t.regions
+    if regions == nil then
+        a:fail("missing required field 'regions' (a list {{name =, shape =, material =}, ...})")
+    end
+    if type(regions) ~= "table" or kind_of(regions) or #regions == 0 then
+        a:fail("regions must be a non-empty list {{name =, shape =, material =}, ...} (got %s)",
+            describe(regions))
+    end
+    for k in pairs(regions) do
+        if math.type(k) ~= "integer" or k < 1 or k > #regions then
+            a:fail("regions must be a list (got key %s)", describe(k))
+        end
+    end
+    local names = {}
+    for i, r in ipairs(regions) do
+        local ra = args(r, fmt("%s: regions[%d]", ctor, i), where,
+            { "name", "shape", "material", "fixed" })
+        local region = {
+            name = ra:string("name"),
+            shape = ra:shape("shape"),
+            material = ra:material("material"),
+            fixed = ra:boolean("fixed", false),
+        }
+        if names[region.name] then
+            ra:fail("name '%s' is already used by regions[%d]", region.name, names[region.name])
+        end
+        names[region.name] = i
+        if type(region.shape) == "function" and not tissue.bounds then
+            ra:fail("shape is a Lua function: give the tissue bounds = {{x0, y0, z0}, "
+                .. "{x1, y1, z1}} (the mesher cannot find a function's extent)")
+        end
+        tissue.regions[i] = region
+    end
+    return new(TISSUE, tissue)
+end
+
+local function is_tag(k)
+    return math.type(k) == "integer" and k >= 1
+end
+
+--- ns.tissue.file{path, regions = {[tag] = material, ...}, names = {[tag] = "..."},
+---                fixed = {tag, ...}}
+-- A Gmsh .msh (4.1 or 2.2 ASCII) tetrahedral mesh; path is relative to the scenario's folder.
+-- Every physical tag in the mesh needs a material in `regions`.
+function ns.tissue.file(t)
+    local where = where_of(2)
+    local ctor = "ns.tissue.file"
+    local a = args(t, ctor, where, { "path", "regions", "names", "fixed" })
+    local tissue = { type = "file", path = a:string("path"), regions = {}, names = {},
+        fixed = {}, where = where }
+    local regions = t.regions
+    if regions == nil then
+        a:fail("missing required field 'regions' ({[tag] = material, ...})")
+    end
+    if type(regions) ~= "table" or kind_of(regions) or next(regions) == nil then
+        a:fail("regions must be a table {[tag] = material, ...} (got %s)", describe(regions))
+    end
+    for tag, m in pairs(regions) do
+        if not is_tag(tag) then
+            a:fail("regions: keys must be Gmsh physical tags (integers >= 1) (got %s)",
+                describe(tag))
+        end
+        if kind_of(m) ~= "material" then
+            a:fail("regions[%d] must be a material (got %s)%s", tag, describe(m),
+                material_hint(m))
+        end
+        tissue.regions[tag] = m
+    end
+    local names = t.names
+    if names ~= nil then
+        if type(names) ~= "table" or kind_of(names) then
+            a:fail("names must be a table {[tag] = \"name\", ...} (got %s)", describe(names))
+        end
+        for tag, name in pairs(names) do
+            if not is_tag(tag) or not regions[tag] then
+                a:fail("names: %s is not a tag in regions", describe(tag))
+            end
+            if type(name) ~= "string" or name == "" then
+                a:fail("names[%d] must be a non-empty string (got %s)", tag, describe(name))
+            end
+            tissue.names[tag] = name
+        end
+    end
+    local fixed = t.fixed
+    if fixed ~= nil then
+        if type(fixed) ~= "table" or kind_of(fixed) then
+            a:fail("fixed must be a list of tags {tag, ...} (got %s)", describe(fixed))
+        end
+        for k, tag in pairs(fixed) do
+            if math.type(k) ~= "integer" then
+                a:fail("fixed must be a list of tags {tag, ...}")
+            end
+            if not is_tag(tag) or not regions[tag] then
+                a:fail("fixed[%d]: %s is not a tag in regions", k, describe(tag))
+            end
+            tissue.fixed[tag] = true
+        end
+    end
+    return new(TISSUE, tissue)
+end
+
+-- Scenario ---------------------------------------------------------------------------------
+
+local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "duration", "needle",
+    "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
+    "accuracy", "solver" }
+-- Accepted now and checked by the stages that use them (later versions).
+local RESERVED = { "needle", "entry", "targets", "obstacles", "markers", "seeds", "camera",
+    "accuracy", "solver" }
+
+--- ns.scenario{name, tissue, description, seed, dt, duration, script, on_tick, ...}
+function ns.scenario(t)
+    local where = where_of(2)
+    local a = args(t, "ns.scenario", where, SCENARIO_FIELDS)
+    local sc = {
+        name = a:string("name"),
+        description = a:string("description", OPTIONAL),
+        seed = a:number("seed", function(x) return math.type(x) == "integer" or x % 1 == 0 end,
+            "(an integer)", OPTIONAL),
+        dt = a:number("dt", GT0, "> 0 [s]", OPTIONAL),
+        duration = a:number("duration", GT0, "> 0 [s]", OPTIONAL),
+        script = a:func("script"),
+        on_tick = a:func("on_tick"),
+        where = where,
+    }
+    local tissue = t.tissue
+    if tissue == nil then
+        a:fail("missing required field 'tissue' (ns.tissue.box{...}, ns.tissue.shapes{...} or "
+            .. "ns.tissue.file{...})")
+    end
+    if kind_of(tissue) ~= "tissue" then
+        a:fail("tissue must be ns.tissue.box{...}, ns.tissue.shapes{...} or ns.tissue.file{...} "
+            .. "(got %s)", describe(tissue))
+    end
+    sc.tissue = tissue
+    for _, k in ipairs(RESERVED) do
+        sc[k] = t[k]
+    end
+    return new(SCENARIO, sc)
+end
+
+return ns

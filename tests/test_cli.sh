@@ -1,0 +1,370 @@
+#!/bin/bash
+# Command-line tests for `needlesim`: the shipped scenarios build, --json has the contract's
+# keys, --mesh-out writes .vtu and .msh and the .msh round-trips through ns.tissue.file, and
+# bad input of every kind exits 1 with one line naming the file and line or field.
+#
+# usage: tests/test_cli.sh NEEDLESIM_BINARY TESTS_SOURCE_DIR
+# Prints one line per case; exits 0 only if every case passes. Needs bash and coreutils
+# (python3, when present, also checks that the JSON parses).
+set -u
+
+BIN=${1:?usage: test_cli.sh NEEDLESIM_BINARY TESTS_SOURCE_DIR}
+TESTS=$(cd "${2:?usage: test_cli.sh NEEDLESIM_BINARY TESTS_SOURCE_DIR}" && pwd)
+ROOT=$(cd "$TESTS/.." && pwd)
+DATA=$TESTS/data
+# The scenarios' `require "needlesim"` must find this tree's scripts, whatever the binary was
+# configured with.
+export NEEDLESIM_SCRIPTS=$ROOT/scripts
+
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-cli.XXXXXX") || exit 1
+trap 'rm -rf "$TMP"' EXIT
+
+PASSED=0
+FAILED=0
+OUT=$TMP/stdout
+ERR=$TMP/stderr
+RC=0
+
+pass() {
+    echo "ok    $1"
+    PASSED=$((PASSED + 1))
+}
+
+fail() {
+    echo "FAIL  $1: $2"
+    if [ -s "$ERR" ]; then
+        sed 's/^/      stderr: /' "$ERR" | head -5
+    fi
+    FAILED=$((FAILED + 1))
+}
+
+# run ARGS...: runs the binary from the source root; sets RC, OUT, ERR.
+run() {
+    (cd "$ROOT" && "$BIN" "$@") >"$OUT" 2>"$ERR"
+    RC=$?
+}
+
+# The value of a top-level key of the --json output in file $1 (one key per line).
+json_value() {
+    sed -n "s/^  \"$2\": \(.*\)$/\1/p" "$1" | sed 's/,$//'
+}
+
+# The region objects (one per line) of the --json output in file $1.
+json_regions() {
+    grep '^    {"name": ' "$1"
+}
+
+# check_json NAME FILE: the JSON has every contract key, regions are all non-empty, the
+# boundary is closed and manifold, and python3 (if any) parses it.
+check_json() {
+    local name=$1 file=$2 key missing="" v
+    for key in scenario tets nodes regions min_dihedral_deg max_dihedral_deg min_quality \
+        boundary_closed boundary_manifold boundary_faces fixed_nodes junction_tets build_ms; do
+        grep -q "^  \"$key\": " "$file" || missing="$missing $key"
+    done
+    if [ -n "$missing" ]; then
+        fail "$name" "JSON lacks keys:$missing"
+        return
+    fi
+    if [ "$(head -c 1 "$file")" != "{" ] || [ "$(tail -n 1 "$file")" != "}" ]; then
+        fail "$name" "stdout is not exactly one JSON object"
+        return
+    fi
+    v=$(json_value "$file" tets)
+    if ! [ "$v" -gt 0 ] 2>/dev/null; then
+        fail "$name" "tets = '$v'"
+        return
+    fi
+    if [ -z "$(json_regions "$file")" ]; then
+        fail "$name" "no regions"
+        return
+    fi
+    if json_regions "$file" | grep -q '"tets": 0,'; then
+        fail "$name" "a region is empty: $(json_regions "$file" | grep '"tets": 0,' | head -1)"
+        return
+    fi
+    for key in boundary_closed boundary_manifold; do
+        v=$(json_value "$file" $key)
+        if [ "$v" != true ]; then
+            fail "$name" "$key = $v"
+            return
+        fi
+    done
+    v=$(json_value "$file" inverted_tets)
+    if [ -n "$v" ] && [ "$v" != 0 ]; then
+        fail "$name" "$v inverted tets"
+        return
+    fi
+    if command -v python3 >/dev/null 2>&1; then
+        if ! python3 -c 'import json, sys; json.load(open(sys.argv[1]))' "$file" 2>/dev/null; then
+            fail "$name" "python3 cannot parse the JSON"
+            return
+        fi
+    fi
+    pass "$name"
+}
+
+# expect_error NAME EXIT_CODE SUBSTRING... -- ARGS...: the run exits with EXIT_CODE, prints
+# nothing on stdout and exactly one line on stderr that contains every SUBSTRING.
+expect_error() {
+    local name=$1 code=$2
+    shift 2
+    local subs=()
+    while [ $# -gt 0 ] && [ "$1" != "--" ]; do
+        subs+=("$1")
+        shift
+    done
+    shift
+    run "$@"
+    if [ "$RC" != "$code" ]; then
+        fail "$name" "exit $RC, expected $code"
+        return
+    fi
+    if [ -s "$OUT" ]; then
+        fail "$name" "wrote to stdout: $(head -c 200 "$OUT")"
+        return
+    fi
+    local lines
+    lines=$(wc -l <"$ERR")
+    if [ "$code" = 1 ] && [ "$lines" != 1 ]; then
+        fail "$name" "stderr has $lines lines, expected one"
+        return
+    fi
+    local s
+    for s in "${subs[@]}"; do
+        if ! grep -qF -- "$s" "$ERR"; then
+            fail "$name" "stderr lacks '$s'"
+            return
+        fi
+    done
+    pass "$name"
+}
+
+# ---- the program ---------------------------------------------------------------------------
+
+run --version
+if [ "$RC" = 0 ] && grep -q '^needlesim [0-9]' "$OUT"; then
+    pass "--version"
+else
+    fail "--version" "exit $RC, stdout: $(head -1 "$OUT")"
+fi
+
+run --help
+if [ "$RC" = 0 ] && grep -q 'needlesim check SCENARIO.lua' "$OUT"; then
+    pass "--help"
+else
+    fail "--help" "exit $RC"
+fi
+
+expect_error "no command: usage, exit 2" 2 "usage:" --
+expect_error "unknown command: exit 2" 2 "unknown command 'frobnicate'" -- frobnicate
+expect_error "run not built yet: exit 2" 2 "'run' is not available in this version yet" -- \
+    run scenarios/phantom.lua
+expect_error "validate not built yet: exit 2" 2 "'validate' is not available" -- validate
+expect_error "bench not built yet: exit 2" 2 "'bench' is not available" -- bench x.lua
+expect_error "check: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
+    check scenarios/phantom.lua --bogus
+expect_error "check: no scenario, exit 2" 2 "missing SCENARIO.lua" -- check --json
+expect_error "check: two scenarios, exit 2" 2 "unexpected argument" -- \
+    check scenarios/phantom.lua scenarios/two_cylinders.lua
+expect_error "check: --mesh-out with unknown extension, exit 2" 2 "use .vtu or .msh" -- \
+    check scenarios/phantom.lua --mesh-out "$TMP/mesh.obj"
+
+# ---- the shipped scenarios -----------------------------------------------------------------
+
+for sc in two_cylinders phantom; do
+    run check "scenarios/$sc.lua" --json
+    if [ "$RC" != 0 ]; then
+        fail "check $sc --json" "exit $RC"
+    else
+        cp "$OUT" "$TMP/$sc.json"
+        check_json "check $sc --json" "$TMP/$sc.json"
+    fi
+    run check "scenarios/$sc.lua"
+    if [ "$RC" = 0 ] && grep -q '^mesh ' "$OUT" &&
+        grep -q '^boundary .*closed yes, manifold yes' "$OUT"; then
+        pass "check $sc (table)"
+    else
+        fail "check $sc (table)" "exit $RC"
+    fi
+done
+
+# two_cylinders: the rods are fixed regions, so there are fixed nodes.
+if json_regions "$TMP/two_cylinders.json" | grep -q '"fixed": true' &&
+    [ "$(json_value "$TMP/two_cylinders.json" fixed_nodes)" -gt 0 ]; then
+    pass "two_cylinders has fixed rods"
+else
+    fail "two_cylinders has fixed rods" "no fixed region or no fixed nodes"
+fi
+# phantom: the held faces give fixed nodes.
+if [ "$(json_value "$TMP/phantom.json" fixed_nodes)" -gt 0 ]; then
+    pass "phantom has fixed faces"
+else
+    fail "phantom has fixed faces" "no fixed nodes"
+fi
+
+run check tests/data/shapes_api.lua --json
+if [ "$RC" = 0 ]; then
+    cp "$OUT" "$TMP/shapes_api.json"
+    check_json "check shapes_api (every shape constructor)" "$TMP/shapes_api.json"
+else
+    fail "check shapes_api (every shape constructor)" "exit $RC"
+fi
+
+# The sandbox: what it allows and refuses (asserts inside the scenario); print goes to stderr
+# and leaves stdout to the JSON.
+run check tests/data/sandbox_ok.lua --json
+if [ "$RC" != 0 ]; then
+    fail "sandbox rules" "exit $RC"
+elif ! grep -q 'sandbox_ok: printed to stderr' "$ERR" || grep -q 'printed' "$OUT"; then
+    fail "sandbox rules" "print did not go to stderr only"
+else
+    cp "$OUT" "$TMP/sandbox_ok.json"
+    check_json "sandbox rules (print to stderr, stdout pure JSON)" "$TMP/sandbox_ok.json"
+fi
+
+# A mesh written by Gmsh itself, with physical tags 1 and 3 (not consecutive).
+if [ -f "$DATA/mesh_gmsh_two_boxes41.msh" ]; then
+    run check tests/data/gmsh_two_boxes.lua --json
+    if [ "$RC" = 0 ] && [ "$(json_regions "$OUT" | wc -l)" = 2 ] &&
+        json_regions "$OUT" | grep -q '"name": "muscle block", .*"fixed": true, "tag": 3}'; then
+        cp "$OUT" "$TMP/gmsh.json"
+        check_json "ns.tissue.file on a Gmsh mesh with tags 1 and 3" "$TMP/gmsh.json"
+    else
+        fail "ns.tissue.file on a Gmsh mesh with tags 1 and 3" "exit $RC or wrong regions"
+    fi
+fi
+
+# Determinism: the same scenario twice gives the same mesh.
+run check tests/data/shapes_api.lua --json
+if [ "$RC" = 0 ] &&
+    diff <(grep -v build_ms "$OUT") <(grep -v build_ms "$TMP/shapes_api.json") >/dev/null; then
+    pass "check is deterministic"
+else
+    fail "check is deterministic" "two runs differ"
+fi
+
+# ---- mesh output and the .msh round trip -----------------------------------------------------
+
+mkdir -p "$TMP/rt"
+run check tests/data/small_shapes.lua --json --mesh-out "$TMP/rt/mesh.vtu"
+if [ "$RC" = 0 ] && [ -s "$TMP/rt/mesh.vtu" ] && grep -q '<VTKFile' "$TMP/rt/mesh.vtu" &&
+    grep -q '^  "tets": ' "$OUT"; then
+    pass "--mesh-out .vtu"
+else
+    fail "--mesh-out .vtu" "exit $RC or no VTK file"
+fi
+
+run check tests/data/small_shapes.lua --json --mesh-out "$TMP/rt/mesh.msh"
+cp "$OUT" "$TMP/small.json"
+if [ "$RC" = 0 ] && [ -s "$TMP/rt/mesh.msh" ] && grep -q '^\$MeshFormat' "$TMP/rt/mesh.msh"; then
+    pass "--mesh-out .msh"
+else
+    fail "--mesh-out .msh" "exit $RC or no MSH file"
+fi
+
+cp "$DATA/load_mesh.lua" "$DATA/missing_tag.lua" "$TMP/rt/"
+run check "$TMP/rt/load_mesh.lua" --json
+if [ "$RC" != 0 ]; then
+    fail ".msh round trip through ns.tissue.file" "exit $RC"
+else
+    cp "$OUT" "$TMP/loaded.json"
+    same=1
+    for key in tets nodes fixed_nodes boundary_faces boundary_closed boundary_manifold; do
+        a=$(json_value "$TMP/small.json" $key)
+        b=$(json_value "$TMP/loaded.json" $key)
+        if [ "$a" != "$b" ]; then
+            fail ".msh round trip through ns.tissue.file" "$key: $a written, $b read back"
+            same=0
+            break
+        fi
+    done
+    # Same regions, in the same order, with the same tet counts and fixed flags.
+    region_summary() { json_regions "$1" | sed 's/"volume_m3": [^,]*, //'; }
+    region_summary "$TMP/small.json" >"$TMP/small.regions"
+    region_summary "$TMP/loaded.json" >"$TMP/loaded.regions"
+    if [ $same = 1 ] && ! diff "$TMP/small.regions" "$TMP/loaded.regions" >/dev/null; then
+        fail ".msh round trip through ns.tissue.file" "regions differ"
+        same=0
+    fi
+    [ $same = 1 ] && pass ".msh round trip through ns.tissue.file"
+fi
+
+expect_error "mesh tag without a material" 1 "missing_tag.lua:5: ns.tissue.file:" \
+    "physical tag 2" -- check "$TMP/rt/missing_tag.lua"
+
+# Corrupt meshes: a tet that names a node the file does not have (node 9) ...
+mkdir -p "$TMP/corrupt" "$TMP/cut"
+cp "$DATA/load_mesh.lua" "$TMP/corrupt/"
+printf '%s\n' '$MeshFormat' '2.2 0 8' '$EndMeshFormat' '$Nodes' '4' '1 0 0 0' '2 1 0 0' \
+    '3 0 1 0' '4 0 0 1' '$EndNodes' '$Elements' '1' '1 4 2 1 1 1 2 3 9' '$EndElements' \
+    >"$TMP/corrupt/mesh.msh"
+expect_error "corrupt .msh (bad node reference)" 1 "load_mesh.lua:6: ns.tissue.file:" \
+    "mesh.msh:" -- check "$TMP/corrupt/load_mesh.lua"
+# ... and the file written above, cut in half.
+if [ -s "$TMP/rt/mesh.msh" ]; then
+    cp "$DATA/load_mesh.lua" "$TMP/cut/"
+    head -c $(($(wc -c <"$TMP/rt/mesh.msh") / 2)) "$TMP/rt/mesh.msh" >"$TMP/cut/mesh.msh"
+    expect_error "corrupt .msh (truncated)" 1 "load_mesh.lua:6: ns.tissue.file:" "mesh.msh:" -- \
+        check "$TMP/cut/load_mesh.lua"
+else
+    fail "corrupt .msh (truncated)" "no mesh was written to cut"
+fi
+# A mesh file is not a scenario.
+expect_error "check of a .msh directly" 1 "check takes a scenario" -- check "$TMP/rt/mesh.msh"
+
+# Writing into a folder that does not exist fails and leaves nothing behind.
+expect_error "--mesh-out into a missing folder" 1 "--mesh-out" -- \
+    check tests/data/small_shapes.lua --mesh-out "$TMP/no/such/dir/mesh.vtu"
+if [ -e "$TMP/no" ]; then
+    fail "--mesh-out into a missing folder leaves no file" "$TMP/no exists"
+else
+    pass "--mesh-out into a missing folder leaves no file"
+fi
+# A failed build writes no mesh either.
+expect_error "failed build writes no mesh" 1 "bad_resolution.lua:4:" -- \
+    check tests/data/bad_resolution.lua --mesh-out "$TMP/never.msh"
+if ls "$TMP"/never* >/dev/null 2>&1; then
+    fail "failed build leaves no file" "$(ls "$TMP"/never*)"
+else
+    pass "failed build leaves no file"
+fi
+
+# ---- bad input: exit 1, one line naming the file and line or field -------------------------
+
+expect_error "Lua syntax error" 1 "tests/data/bad_syntax.lua:4:" "expected" -- \
+    check tests/data/bad_syntax.lua
+expect_error "misspelt field in ns.scenario" 1 \
+    "tests/data/bad_scenario_field.lua:2: ns.scenario: unknown field 'tisue'" -- \
+    check tests/data/bad_scenario_field.lua
+expect_error "misspelt field in ns.tissue.box" 1 \
+    "tests/data/bad_box_field.lua:4: ns.tissue.box: unknown field 'resolutoin'" \
+    "did you mean 'resolution'" -- check tests/data/bad_box_field.lua
+expect_error "negative resolution" 1 \
+    "tests/data/bad_resolution.lua:4: ns.tissue.box: resolution must be a number > 0" \
+    "(got -0.004)" -- check tests/data/bad_resolution.lua
+expect_error "missing mesh file" 1 "tests/data/missing_mesh.lua:4: ns.tissue.file: cannot open" \
+    "pelvis.msh" "No such file or directory" -- check tests/data/missing_mesh.lua
+expect_error "unknown material field" 1 \
+    "tests/data/bad_material_field.lua:2: ns.material: unknown field 'yougns'" -- \
+    check tests/data/bad_material_field.lua
+expect_error "runtime error in a Lua function shape" 1 "tests/data/bad_shape_function.lua:6:" \
+    "radius_of_blob" -- check tests/data/bad_shape_function.lua
+expect_error "function shape without bounds" 1 \
+    "tests/data/function_no_bounds.lua:4: ns.tissue.shapes: regions[1]:" "bounds" -- \
+    check tests/data/function_no_bounds.lua
+expect_error "endless loop (instruction limit)" 1 "tests/data/endless_loop.lua:" \
+    "instruction limit exceeded" -- check tests/data/endless_loop.lua
+expect_error "endless loop in a shape function" 1 "tests/data/endless_shape.lua:9:" \
+    "instruction limit exceeded" -- check tests/data/endless_shape.lua
+expect_error "sandbox: require \"io\"" 1 "tests/data/sandbox_io.lua:2:" \
+    "not available in the needlesim sandbox" -- check tests/data/sandbox_io.lua
+expect_error "sandbox: os is absent" 1 "tests/data/sandbox_os.lua:2:" "global 'os'" -- \
+    check tests/data/sandbox_os.lua
+expect_error "scenario file returns no ns.scenario" 1 "tests/data/no_scenario.lua:" \
+    "must return ns.scenario" -- check tests/data/no_scenario.lua
+expect_error "nonexistent scenario path" 1 "cannot open 'tests/data/no_such_scenario.lua'" -- \
+    check tests/data/no_such_scenario.lua
+
+echo "$PASSED passed, $FAILED failed"
+[ "$FAILED" = 0 ]
