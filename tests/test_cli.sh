@@ -172,7 +172,7 @@ expect_error "check: --mesh-out with unknown extension, exit 2" 2 "use .vtu or .
 
 # ---- the shipped scenarios -----------------------------------------------------------------
 
-for sc in two_cylinders phantom; do
+for sc in brachytherapy two_cylinders phantom; do
     run check "scenarios/$sc.lua" --json
     if [ "$RC" != 0 ]; then
         fail "check $sc --json" "exit $RC"
@@ -188,6 +188,20 @@ for sc in two_cylinders phantom; do
         fail "check $sc (table)" "exit $RC"
     fi
 done
+
+# brachytherapy (issue #2's bar): 10,000-16,000 tets, dihedral angles in [9, 162] degrees, every
+# region non-empty (check_json), boundary closed and manifold (check_json), bone held.
+f=$TMP/brachytherapy.json
+t=$(json_value "$f" tets)
+lo=$(json_value "$f" min_dihedral_deg)
+hi=$(json_value "$f" max_dihedral_deg)
+if [ "$t" -ge 10000 ] 2>/dev/null && [ "$t" -le 16000 ] &&
+    awk -v lo="$lo" -v hi="$hi" 'BEGIN { exit !(lo >= 9 && hi <= 162) }' &&
+    [ "$(json_regions "$f" | wc -l)" -eq 7 ] && [ "$(json_value "$f" fixed_nodes)" -gt 0 ]; then
+    pass "brachytherapy: $t tets, dihedral $lo..$hi deg, 7 regions, bone fixed"
+else
+    fail "brachytherapy mesh bar" "tets $t, dihedral $lo..$hi"
+fi
 
 # two_cylinders: the rods are fixed regions, so there are fixed nodes.
 if json_regions "$TMP/two_cylinders.json" | grep -q '"fixed": true' &&
