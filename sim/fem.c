@@ -167,40 +167,12 @@ static void elastic_tangent(const NsFemMaterial *m, const double s[3], Tangent *
     }
 }
 
-/* Clamp the eigenvalues of the symmetric 3x3 A at zero (cyclic Jacobi; tiny and exact enough). */
+/* Clamp the eigenvalues of the symmetric 3x3 A at zero. */
 static void project_psd3(double A[9])
 {
-    double V[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, M[9];
+    double V[9], M[9];
     memcpy(M, A, sizeof M);
-    for (int sweep = 0; sweep < 20; sweep++) {
-        double off = M[1] * M[1] + M[2] * M[2] + M[5] * M[5];
-        if (off <= 1e-28 * (M[0] * M[0] + M[4] * M[4] + M[8] * M[8]) || off == 0.0)
-            break;
-        for (int k = 0; k < 3; k++) {
-            int p = pair_ij[k][0], qq = pair_ij[k][1];
-            double apq = M[3 * p + qq];
-            if (apq == 0.0)
-                continue;
-            double tau = (M[3 * qq + qq] - M[3 * p + p]) / (2.0 * apq);
-            double t = (tau >= 0.0 ? 1.0 : -1.0) / (fabs(tau) + sqrt(1.0 + tau * tau));
-            double c = 1.0 / sqrt(1.0 + t * t), sn = t * c;
-            for (int r = 0; r < 3; r++) {
-                double x = M[3 * r + p], y = M[3 * r + qq];
-                M[3 * r + p] = c * x - sn * y;
-                M[3 * r + qq] = sn * x + c * y;
-            }
-            for (int r = 0; r < 3; r++) {
-                double x = M[3 * p + r], y = M[3 * qq + r];
-                M[3 * p + r] = c * x - sn * y;
-                M[3 * qq + r] = sn * x + c * y;
-            }
-            for (int r = 0; r < 3; r++) {
-                double x = V[3 * r + p], y = V[3 * r + qq];
-                V[3 * r + p] = c * x - sn * y;
-                V[3 * r + qq] = sn * x + c * y;
-            }
-        }
-    }
+    ns_sym3_eigen(M, V);
     double lam[3] = {M[0] > 0 ? M[0] : 0, M[4] > 0 ? M[4] : 0, M[8] > 0 ? M[8] : 0};
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++)

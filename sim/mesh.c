@@ -172,8 +172,7 @@ static int tet_face_index(const NsMesh *m, int t, int a, int b, int c)
     const int *tn = m->tet_node + 4 * t;
     for (int k = 0; k < 4; k++) {
         if (tn[k] != a && tn[k] != b && tn[k] != c)
-            return tet_has_node(m, t, a) && tet_has_node(m, t, b) && tet_has_node(m, t, c) ? k
-                                                                                            : -1;
+            return tet_has_node(m, t, a) && tet_has_node(m, t, b) && tet_has_node(m, t, c) ? k : -1;
     }
     return -1;
 }
@@ -392,8 +391,7 @@ int ns_mesh_validate(const NsMesh *m, char *err, int err_sz)
                 }
             }
             if (sharing > 1)
-                FAIL("face (%d %d %d) of tet %d is shared by %d other tets", a, b, c, t,
-                     sharing);
+                FAIL("face (%d %d %d) of tet %d is shared by %d other tets", a, b, c, t, sharing);
             if (o != other)
                 FAIL("tet %d face %d: adjacency says %d but the neighbour is %d", t, k, o, other);
             if (o >= 0) {

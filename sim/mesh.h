@@ -28,11 +28,11 @@ typedef struct NsMesh {
     int node_slots;
     int node_cap;
     int node_alive;
-    double *u;       /* (node_cap x 3) material (rest) coordinates [m] */
-    double *x;       /* (node_cap x 3) world coordinates [m] */
-    double *v;       /* (node_cap x 3) velocity [m/s] */
-    double *a;       /* (node_cap x 3) acceleration [m/s^2] */
-    uint8_t *flags;  /* (node_cap) NS_NODE_* bits */
+    double *u;            /* (node_cap x 3) material (rest) coordinates [m] */
+    double *x;            /* (node_cap x 3) world coordinates [m] */
+    double *v;            /* (node_cap x 3) velocity [m/s] */
+    double *a;            /* (node_cap x 3) acceleration [m/s^2] */
+    uint8_t *flags;       /* (node_cap) NS_NODE_* bits */
     NsIntList *node_tets; /* (node_cap) incident alive tets, unordered */
 
     /* tets: slots [0, tet_slots), of which tet_alive are in use */
@@ -96,10 +96,10 @@ int ns_mesh_validate(const NsMesh *m, char *err, int err_sz);
 
 /* Boundary faces (faces with one tet) as a triangle surface. */
 typedef struct NsBoundaryStats {
-    int faces;     /* boundary triangles */
-    bool closed;   /* every boundary edge has an even number (>0) of boundary faces */
-    bool manifold; /* every boundary edge has exactly two faces and every boundary
-                      vertex's faces form a single fan */
+    int faces;       /* boundary triangles */
+    bool closed;     /* every boundary edge has an even number (>0) of boundary faces */
+    bool manifold;   /* every boundary edge has exactly two faces and every boundary
+                        vertex's faces form a single fan */
     int bad_edge[2]; /* first edge breaking closed/manifold, or -1 -1 */
     int bad_vertex;  /* first vertex whose fan is not a single cycle, or -1 */
 } NsBoundaryStats;

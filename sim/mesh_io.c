@@ -14,6 +14,7 @@
 #endif
 
 #include "mesh_io.h"
+#include "err.h"
 #include "quality.h"
 
 #include <errno.h>
@@ -30,16 +31,6 @@
 /* |quality| at or below this is a flat tet. Quality is 6*sqrt(2)*volume / rms_edge^3, so this is
  * volume relative to edge length cubed: far below any sliver a mesher would keep. */
 #define NS_MSH_DEGENERATE_QUALITY 1e-8
-
-static void set_err(char *err, int err_sz, const char *fmt, ...)
-{
-    if (!err || err_sz <= 0)
-        return;
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err, (size_t)err_sz, fmt, ap);
-    va_end(ap);
-}
 
 /* Grows *items (element size elem) so that it holds at least need elements. */
 static int grow(void **items, size_t *cap, size_t need, size_t elem)
@@ -1039,14 +1030,14 @@ static int read_whole_file(const char *path, char **out, size_t *out_len, char *
 {
     FILE *f = fopen(path, "rb");
     if (!f) {
-        set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
+        ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
         return -1;
     }
     char *buf = NULL;
     size_t len = 0, cap = 0;
     for (;;) {
         if (grow((void **)&buf, &cap, len + 65536 + 1, 1)) {
-            set_err(err, err_sz, "%s: out of memory reading the file", path);
+            ns_set_err(err, err_sz, "%s: out of memory reading the file", path);
             free(buf);
             fclose(f);
             return -1;
@@ -1057,7 +1048,7 @@ static int read_whole_file(const char *path, char **out, size_t *out_len, char *
             break;
     }
     if (ferror(f)) {
-        set_err(err, err_sz, "%s: cannot read: %s", path, strerror(errno));
+        ns_set_err(err, err_sz, "%s: cannot read: %s", path, strerror(errno));
         free(buf);
         fclose(f);
         return -1;

@@ -9,9 +9,9 @@
 
 #include "mesh.h"
 
-/* Reads path into m, which the call initialises (do not pass a mesh that holds data). Returns 0, or -1 with "path:line: message" in err.
- * Only tetrahedra (Gmsh element type 4) make the mesh; points, lines and triangles in the
- * file are skipped. Tets without a physical tag get region 0. */
+/* Reads path into m, which the call initialises (do not pass a mesh that holds data). Returns 0, or
+ * -1 with "path:line: message" in err. Only tetrahedra (Gmsh element type 4) make the mesh; points,
+ * lines and triangles in the file are skipped. Tets without a physical tag get region 0. */
 int ns_mesh_read_msh(const char *path, NsMesh *m, char *err, int err_sz);
 
 /* Writes MSH 4.1 ASCII. names (may be NULL) gives $PhysicalNames for regions

@@ -5,6 +5,7 @@
 #endif
 
 #include "mesh_io.h"
+#include "err.h"
 #include "quality.h"
 
 #include <errno.h>
@@ -18,16 +19,6 @@
 #include <string.h>
 #include <unistd.h>
 
-static void set_err(char *err, int err_sz, const char *fmt, ...)
-{
-    if (!err || err_sz <= 0)
-        return;
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err, (size_t)err_sz, fmt, ap);
-    va_end(ap);
-}
-
 /* ---------------------------------------------------------------------------------------------
  * Writing
  * ------------------------------------------------------------------------------------------- */
@@ -36,22 +27,23 @@ static void set_err(char *err, int err_sz, const char *fmt, ...)
 static int check_writable(const char *path, const NsMesh *m, char *err, int err_sz)
 {
     if (m->node_slots != m->node_alive || m->tet_slots != m->tet_alive) {
-        set_err(err, err_sz,
-                "%s: the mesh is not compact (%d of %d node slots and %d of %d tet slots in "
-                "use); call ns_mesh_compact first",
-                path, m->node_alive, m->node_slots, m->tet_alive, m->tet_slots);
+        ns_set_err(err, err_sz,
+                   "%s: the mesh is not compact (%d of %d node slots and %d of %d tet slots in "
+                   "use); call ns_mesh_compact first",
+                   path, m->node_alive, m->node_slots, m->tet_alive, m->tet_slots);
         return -1;
     }
     for (int i = 0; i < m->node_slots; i++) {
         const double *u = &m->u[3 * i];
         if (!isfinite(u[0]) || !isfinite(u[1]) || !isfinite(u[2])) {
-            set_err(err, err_sz, "%s: node %d has a non-finite material coordinate", path, i);
+            ns_set_err(err, err_sz, "%s: node %d has a non-finite material coordinate", path, i);
             return -1;
         }
     }
     for (int t = 0; t < m->tet_slots; t++) {
         if (m->tet_region[t] < 0 || m->tet_region[t] == INT_MAX) {
-            set_err(err, err_sz, "%s: tet %d has an invalid region %d", path, t, m->tet_region[t]);
+            ns_set_err(err, err_sz, "%s: tet %d has an invalid region %d", path, t,
+                       m->tet_region[t]);
             return -1;
         }
     }
@@ -69,14 +61,14 @@ static int atomic_open(AtomicFile *af, const char *path, char *err, int err_sz)
     af->f = NULL;
     af->tmp = malloc(n + 5);
     if (!af->tmp) {
-        set_err(err, err_sz, "%s: out of memory", path);
+        ns_set_err(err, err_sz, "%s: out of memory", path);
         return -1;
     }
     memcpy(af->tmp, path, n);
     memcpy(af->tmp + n, ".tmp", 5);
     af->f = fopen(af->tmp, "w");
     if (!af->f) {
-        set_err(err, err_sz, "%s: cannot create %s: %s", path, af->tmp, strerror(errno));
+        ns_set_err(err, err_sz, "%s: cannot create %s: %s", path, af->tmp, strerror(errno));
         free(af->tmp);
         af->tmp = NULL;
         return -1;
@@ -90,19 +82,19 @@ static int atomic_close(AtomicFile *af, const char *path, char *err, int err_sz)
 {
     int rc = 0;
     if ((fflush(af->f) != 0 || ferror(af->f))) {
-        set_err(err, err_sz, "%s: write error: %s", path, strerror(errno));
+        ns_set_err(err, err_sz, "%s: write error: %s", path, strerror(errno));
         rc = -1;
     }
     if (rc == 0 && fsync(fileno(af->f)) != 0) {
-        set_err(err, err_sz, "%s: cannot sync: %s", path, strerror(errno));
+        ns_set_err(err, err_sz, "%s: cannot sync: %s", path, strerror(errno));
         rc = -1;
     }
     if (fclose(af->f) != 0 && rc == 0) {
-        set_err(err, err_sz, "%s: write error: %s", path, strerror(errno));
+        ns_set_err(err, err_sz, "%s: write error: %s", path, strerror(errno));
         rc = -1;
     }
     if (rc == 0 && rename(af->tmp, path) != 0) {
-        set_err(err, err_sz, "%s: cannot rename %s over it: %s", path, af->tmp, strerror(errno));
+        ns_set_err(err, err_sz, "%s: cannot rename %s over it: %s", path, af->tmp, strerror(errno));
         rc = -1;
     }
     if (rc != 0)
@@ -128,7 +120,7 @@ int ns_mesh_write_msh(const char *path, const NsMesh *m, const char *const *name
         return -1;
     int nn = m->node_slots, nt = m->tet_slots;
     if (nt == 0) {
-        set_err(err, err_sz, "%s: the mesh has no tetrahedra to write", path);
+        ns_set_err(err, err_sz, "%s: the mesh has no tetrahedra to write", path);
         return -1;
     }
     int named = 0;
@@ -136,7 +128,8 @@ int ns_mesh_write_msh(const char *path, const NsMesh *m, const char *const *name
         if (!names[i])
             continue;
         if (strpbrk(names[i], "\"\n\r")) {
-            set_err(err, err_sz, "%s: region %d's name contains a quote or a line break", path, i);
+            ns_set_err(err, err_sz, "%s: region %d's name contains a quote or a line break", path,
+                       i);
             return -1;
         }
         named++;
@@ -145,7 +138,7 @@ int ns_mesh_write_msh(const char *path, const NsMesh *m, const char *const *name
     /* (region, tet) pairs sorted: one element block per region, tets in index order */
     int *rt = malloc((size_t)nt * 2 * sizeof *rt);
     if (!rt) {
-        set_err(err, err_sz, "%s: out of memory", path);
+        ns_set_err(err, err_sz, "%s: out of memory", path);
         return -1;
     }
     for (int t = 0; t < nt; t++) {

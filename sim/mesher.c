@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "err.h"
 #include "quality.h"
 
 enum { OUTSIDE = -1 };
@@ -50,16 +51,6 @@ NsMesherDef ns_default_mesher_def(void)
     d.lo[0] = 1.0; /* lo > hi: take the box from the regions */
     d.hi[0] = -1.0;
     return d;
-}
-
-static void set_err(char *err, int err_sz, const char *fmt, ...)
-{
-    if (!err || err_sz <= 0)
-        return;
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err, (size_t)err_sz, fmt, ap);
-    va_end(ap);
 }
 
 /* ---- open-addressing map from a 64-bit edge key to a cut index ------------------------------ */
@@ -689,15 +680,16 @@ static int emit(Ctx *c, const Local *L, const TetOut *o, const double centroid[3
         memcpy(v, o->v[k], sizeof v);
         for (int i = 0; i < 4; i++) {
             if (point_pos(c, L, centroid, v[i], p[i])) {
-                set_err(err, err_sz, "mesher: internal error: missing cut point in lattice tet");
+                ns_set_err(err, err_sz, "mesher: internal error: missing cut point in lattice tet");
                 return -1;
             }
         }
         /* Orient positively (L&S's stencils are drawn unoriented). */
         double vol = ns_tet_volume(p[0], p[1], p[2], p[3]);
         if (!(vol != 0.0)) {
-            set_err(err, err_sz, "mesher: internal error: flat tet near (%g, %g, %g) (region %d)",
-                    p[0][0], p[0][1], p[0][2], o->lab[k]);
+            ns_set_err(err, err_sz,
+                       "mesher: internal error: flat tet near (%g, %g, %g) (region %d)", p[0][0],
+                       p[0][1], p[0][2], o->lab[k]);
             return -1;
         }
         if (vol < 0) {
@@ -779,10 +771,10 @@ static int stuff_tet(Ctx *c, const Local *L, char *err, int err_sz)
             int before = interior;
             if (stuff_side(&o, L, sg, keep, &interior) ||
                 (side == 1 && before >= 0 && before != interior)) {
-                set_err(err, err_sz,
-                        "mesher: internal error: the two sides of an interface disagree in the "
-                        "lattice tet at vertex %lld",
-                        (long long)L->id[0]);
+                ns_set_err(err, err_sz,
+                           "mesher: internal error: the two sides of an interface disagree in the "
+                           "lattice tet at vertex %lld",
+                           (long long)L->id[0]);
                 return -1;
             }
         }
@@ -805,8 +797,8 @@ static int stuff_tet(Ctx *c, const Local *L, char *err, int err_sz)
             double q[3][3], mid[3];
             for (int j = 0; j < 3; j++)
                 if (point_pos(c, L, centroid, tri[k][j], q[j])) {
-                    set_err(err, err_sz,
-                            "mesher: internal error: missing cut point in junction tet");
+                    ns_set_err(err, err_sz,
+                               "mesher: internal error: missing cut point in junction tet");
                     return -1;
                 }
             for (int a = 0; a < 3; a++)
@@ -895,19 +887,20 @@ static int stuff_all(Ctx *c, char *err, int err_sz)
 static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
 {
     if (!(def->spacing > 0) || !isfinite(def->spacing)) {
-        set_err(err, err_sz, "mesher: spacing must be positive (got %g m)", def->spacing);
+        ns_set_err(err, err_sz, "mesher: spacing must be positive (got %g m)", def->spacing);
         return -1;
     }
     if (!def->regions || def->region_count <= 0) {
-        set_err(err, err_sz, "mesher: no regions to mesh");
+        ns_set_err(err, err_sz, "mesher: no regions to mesh");
         return -1;
     }
     /* Below 0.5 no cut point can be too close to both ends of its edge; above 0 a cut point
      * exactly on a lattice vertex is always warped away (else it would make flat tets). */
     if (!(def->alpha_long > 0 && def->alpha_long < 0.5) ||
         !(def->alpha_short > 0 && def->alpha_short < 0.5)) {
-        set_err(err, err_sz, "mesher: alpha_long and alpha_short must lie in (0, 0.5) (got %g, %g)",
-                def->alpha_long, def->alpha_short);
+        ns_set_err(err, err_sz,
+                   "mesher: alpha_long and alpha_short must lie in (0, 0.5) (got %g, %g)",
+                   def->alpha_long, def->alpha_short);
         return -1;
     }
     int nr = def->region_count;
@@ -922,7 +915,7 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
     bool all_bounded = true;
     for (int r = 0; r < nr; r++) {
         if (!def->regions[r].shape) {
-            set_err(err, err_sz, "mesher: region %d has no shape", r);
+            ns_set_err(err, err_sz, "mesher: region %d has no shape", r);
             return -1;
         }
         c->rbounded[r] = ns_shape_bounds(def->regions[r].shape, c->rlo[r], c->rhi[r]);
@@ -947,11 +940,11 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
     double lo[3], hi[3];
     if (def->lo[0] > def->hi[0]) {
         if (!all_bounded) {
-            set_err(err, err_sz, "mesher: a region is unbounded; set the lattice box (lo, hi)");
+            ns_set_err(err, err_sz, "mesher: a region is unbounded; set the lattice box (lo, hi)");
             return -1;
         }
         if (!(blo[0] <= bhi[0])) {
-            set_err(err, err_sz, "mesher: every region is empty (its bounds hold nothing)");
+            ns_set_err(err, err_sz, "mesher: every region is empty (its bounds hold nothing)");
             return -1;
         }
         memcpy(lo, blo, sizeof lo);
@@ -964,8 +957,8 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
     double count = 1.0;
     for (int a = 0; a < 3; a++) {
         if (!isfinite(lo[a]) || !isfinite(hi[a]) || !(lo[a] <= hi[a])) {
-            set_err(err, err_sz, "mesher: empty or invalid lattice box on axis %d ([%g, %g] m)", a,
-                    lo[a], hi[a]);
+            ns_set_err(err, err_sz, "mesher: empty or invalid lattice box on axis %d ([%g, %g] m)",
+                       a, lo[a], hi[a]);
             return -1;
         }
         /* corners lo + h i for i = -1 .. n + 1 cover [lo - h, hi + h] */
@@ -973,8 +966,8 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
         if (n < 1)
             n = 1;
         if (n > 1e6) {
-            set_err(err, err_sz, "mesher: lattice too large (spacing %g m for a %g m box)", h,
-                    hi[a] - lo[a]);
+            ns_set_err(err, err_sz, "mesher: lattice too large (spacing %g m for a %g m box)", h,
+                       hi[a] - lo[a]);
             return -1;
         }
         c->nc[a] = (int)n + 3;
@@ -984,9 +977,9 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
     }
     count += (double)c->nz[0] * c->nz[1] * c->nz[2];
     if (count > (double)NS_MAX_LATTICE_VERTICES) {
-        set_err(err, err_sz,
-                "mesher: lattice too large (%.0f vertices, limit %lld): increase the spacing",
-                count, NS_MAX_LATTICE_VERTICES);
+        ns_set_err(err, err_sz,
+                   "mesher: lattice too large (%.0f vertices, limit %lld): increase the spacing",
+                   count, NS_MAX_LATTICE_VERTICES);
         return -1;
     }
     c->h = h;
@@ -1040,7 +1033,7 @@ int ns_mesher_stuff(const NsMesherDef *def, NsMesh *out, NsMesherStats *stats, c
         err[0] = '\0';
     int rc = def ? setup(&c, def, err, err_sz) : -1;
     if (!def)
-        set_err(err, err_sz, "mesher: no definition");
+        ns_set_err(err, err_sz, "mesher: no definition");
     if (rc == 0 && !c.nan)
         rc = compute_cuts(&c);
     if (rc == 0 && !c.nan) {
@@ -1048,12 +1041,12 @@ int ns_mesher_stuff(const NsMesherDef *def, NsMesh *out, NsMesherStats *stats, c
         rc = stuff_all(&c, err, err_sz);
     }
     if (rc == 0 && c.nan) {
-        set_err(err, err_sz, "shape evaluated to NaN at (%g, %g, %g)", c.nan_p[0], c.nan_p[1],
-                c.nan_p[2]);
+        ns_set_err(err, err_sz, "shape evaluated to NaN at (%g, %g, %g)", c.nan_p[0], c.nan_p[1],
+                   c.nan_p[2]);
         rc = -1;
     }
     if (rc == 0 && out->tet_alive == 0) {
-        set_err(err, err_sz, "the regions produced no tets (resolution too coarse?)");
+        ns_set_err(err, err_sz, "the regions produced no tets (resolution too coarse?)");
         rc = -1;
     }
     if (rc == 0) {
@@ -1067,7 +1060,7 @@ int ns_mesher_stuff(const NsMesherDef *def, NsMesh *out, NsMesherStats *stats, c
             c.oom = true;
     }
     if (c.oom) {
-        set_err(err, err_sz, "mesher: out of memory");
+        ns_set_err(err, err_sz, "mesher: out of memory");
         rc = -1;
     }
     if (rc == 0) {

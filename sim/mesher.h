@@ -21,7 +21,7 @@ typedef struct NsMesherRegion {
 } NsMesherRegion;
 
 typedef struct NsMesherDef {
-    double spacing;     /* lattice spacing h: the long (axis-aligned) lattice edge [m] */
+    double spacing; /* lattice spacing h: the long (axis-aligned) lattice edge [m] */
     /* Warp thresholds, fractions of the edge, for cuts against OUTSIDE (the outer boundary).
      * Cuts between two regions warp with at most 0.21509 / 0.35900 ("two-sided" values, see
      * docs/mesher.md), since both sides of such an interface are kept. */

@@ -112,8 +112,7 @@ void ns_mesh_quality(const NsMesh *m, bool use_world, NsQualityStats *out)
         if (!ns_mesh_tet_alive(m, t))
             continue;
         const int *tn = m->tet_node + 4 * t;
-        const double *a = X + 3 * tn[0], *b = X + 3 * tn[1], *c = X + 3 * tn[2],
-                     *d = X + 3 * tn[3];
+        const double *a = X + 3 * tn[0], *b = X + 3 * tn[1], *c = X + 3 * tn[2], *d = X + 3 * tn[3];
         double ang[6];
         ns_tet_dihedrals(a, b, c, d, ang);
         for (int i = 0; i < 6; i++) {

@@ -22,8 +22,8 @@ typedef struct NsQualityStats {
     double min_dihedral_deg;
     double max_dihedral_deg;
     double min_quality;
-    int inverted;    /* tets with signed volume <= 0 */
-    int worst_tet;   /* tet with min quality */
+    int inverted;  /* tets with signed volume <= 0 */
+    int worst_tet; /* tet with min quality */
 } NsQualityStats;
 
 /* Over all alive tets, in material coordinates (use_world = false) or world coordinates. */

@@ -9,7 +9,7 @@
 
 #include <math.h>
 
-static void jacobi_eigen(double A[9], double V[9])
+void ns_sym3_eigen(double A[9], double V[9])
 {
     for (int i = 0; i < 9; i++)
         V[i] = (i % 4 == 0) ? 1.0 : 0.0;
@@ -78,7 +78,7 @@ void ns_svd3(const double F[9], double U[9], double s[3], double V[9])
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++)
             A[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j];
-    jacobi_eigen(A, V);
+    ns_sym3_eigen(A, V);
     double lam[3] = {A[0], A[4], A[8]};
     /* Sort eigenpairs in decreasing order (columns of V move with them). */
     for (int i = 0; i < 2; i++)

@@ -5,6 +5,11 @@
 #define NS_SVD3_H
 
 /* Matrices are row-major 3x3. */
+
+/* Eigen-decomposition of the symmetric A by cyclic Jacobi rotations: on return A is diagonal
+ * (the eigenvalues, unsorted) and the columns of V are the eigenvectors. */
+void ns_sym3_eigen(double A[9], double V[9]);
+
 void ns_svd3(const double F[9], double U[9], double s[3], double V[9]);
 
 #endif

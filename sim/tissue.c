@@ -2,6 +2,8 @@
  * one Newton iteration on the accelerations (§3.1, Eq. 1-5). */
 #include "tissue.h"
 
+#include "err.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -27,12 +29,6 @@ static double now_ms(void)
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-static void set_err(char *err, int err_sz, const char *msg, int a, double b)
-{
-    if (err && err_sz > 0)
-        snprintf(err, (size_t)err_sz, msg, a, b);
-}
-
 void ns_tissue_free(NsTissue *t)
 {
     ns_mesh_free(&t->mesh);
@@ -56,7 +52,7 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
 {
     memset(t, 0, sizeof *t);
     if (ns_mesh_copy(&t->mesh, mesh)) {
-        set_err(err, err_sz, "out of memory (%d, %g)", 0, 0);
+        ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
     t->params = params ? *params : ns_default_tissue_params();
@@ -77,7 +73,7 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jvalid || !t->mass ||
         !t->force || !t->dof_fixed || !t->work || ns_bsm_resize(&t->K, nn) ||
         ns_bsm_resize(&t->D, nn) || ns_bsm_resize(&t->A, nn)) {
-        set_err(err, err_sz, "out of memory (%d, %g)", 0, 0);
+        ns_set_err(err, err_sz, "out of memory");
         ns_tissue_free(t);
         return -1;
     }
@@ -85,10 +81,10 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
         const NsTissueMaterial *mt = &materials[m];
         if (!(mt->density > 0.0) || !(mt->fem.mu > 0.0) || !(mt->fem.lambda >= 0.0) ||
             !(mt->fem.damp_mu >= 0.0) || !(mt->fem.damp_lambda >= 0.0)) {
-            set_err(err, err_sz,
-                    "material %d: density, moduli and damping must be positive "
-                    "(density %g)",
-                    m, mt->density);
+            ns_set_err(err, err_sz,
+                       "material %d: density, moduli and damping must be positive "
+                       "(density %g)",
+                       m, mt->density);
             ns_tissue_free(t);
             return -1;
         }
@@ -100,15 +96,15 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
             continue;
         const int *tn = M->tet_node + 4 * e;
         if (M->tet_region[e] >= material_count) {
-            set_err(err, err_sz, "tet %d has region %g, which has no material", e,
-                    (double)M->tet_region[e]);
+            ns_set_err(err, err_sz, "tet %d has region %d, which has no material", e,
+                       M->tet_region[e]);
             ns_tissue_free(t);
             return -1;
         }
         if (ns_fem_rest(M->u + 3 * tn[0], M->u + 3 * tn[1], M->u + 3 * tn[2], M->u + 3 * tn[3],
                         &t->rest[e])) {
-            set_err(err, err_sz, "tet %d is flat or inverted in material space (volume %g)", e,
-                    t->rest[e].W);
+            ns_set_err(err, err_sz, "tet %d is flat or inverted in material space (volume %g)", e,
+                       t->rest[e].W);
             ns_tissue_free(t);
             return -1;
         }
