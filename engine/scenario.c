@@ -27,6 +27,12 @@
 /* CSG trees deeper than this are refused (a table that contains itself would recurse). */
 #define SHAPE_DEPTH_MAX 200
 
+static int cmp_int(const void *a, const void *b)
+{
+    int x = *(const int *)a, y = *(const int *)b;
+    return (x > y) - (x < y);
+}
+
 typedef struct Builder Builder;
 
 /* A Lua function used as a shape: called by the mesher through ns_shape_callback. */
@@ -762,27 +768,27 @@ static int build_file(Builder *b, int ti, const char *where)
     if (ns_mesh_compact(m) != 0)
         return fail(b, "%s: out of memory", where);
 
-    /* Physical tags present (mesh region r is tag r + 1), in ascending order. */
-    int max_region = -1;
-    for (int t = 0; t < m->tet_slots; t++)
-        if (ns_mesh_tet_alive(m, t) && m->tet_region[t] > max_region)
-            max_region = m->tet_region[t];
-    if (max_region < 0)
-        return fail(b, "%s: %s: '%s' has no tetrahedra", where, ctor, sc->mesh_path);
-    int *remap = malloc((size_t)(max_region + 1) * sizeof *remap);
-    if (!remap)
+    /* Physical tags present (mesh region r is tag r + 1), distinct and ascending. Sorted, not
+     * indexed by tag: a tag may be as large as INT_MAX. */
+    int *present = malloc((size_t)(m->tet_slots > 0 ? m->tet_slots : 1) * sizeof *present);
+    if (!present)
         return fail(b, "%s: out of memory", where);
-    for (int r = 0; r <= max_region; r++)
-        remap[r] = -1;
+    int count = 0;
     for (int t = 0; t < m->tet_slots; t++)
         if (ns_mesh_tet_alive(m, t))
-            remap[m->tet_region[t]] = 0;
-    int count = 0;
-    for (int r = 0; r <= max_region; r++)
-        if (remap[r] == 0)
-            remap[r] = count++;
+            present[count++] = m->tet_region[t];
+    if (count == 0) {
+        free(present);
+        return fail(b, "%s: %s: '%s' has no tetrahedra", where, ctor, sc->mesh_path);
+    }
+    qsort(present, (size_t)count, sizeof *present, cmp_int);
+    int distinct = 0;
+    for (int i = 0; i < count; i++)
+        if (i == 0 || present[i] != present[distinct - 1])
+            present[distinct++] = present[i];
+    count = distinct;
     if (alloc_regions(b, count, where)) {
-        free(remap);
+        free(present);
         return -1;
     }
 
@@ -793,11 +799,9 @@ static int build_file(Builder *b, int ti, const char *where)
     int rc = 0;
     if (!lua_istable(L, regions_i))
         rc = fail(b, "%s: %s: regions must be a table {[tag] = material, ...}", where, ctor);
-    for (int r = 0; r <= max_region && rc == 0; r++) {
-        if (remap[r] < 0)
-            continue;
-        int tag = r + 1;
-        NsRegionInfo *reg = &sc->regions[remap[r]];
+    for (int i = 0; i < count && rc == 0; i++) {
+        int tag = present[i] + 1;
+        NsRegionInfo *reg = &sc->regions[i];
         reg->tag = tag;
         char rctx[64];
         snprintf(rctx, sizeof rctx, "%s: regions[%d]", ctor, tag);
@@ -831,14 +835,16 @@ static int build_file(Builder *b, int ti, const char *where)
         for (int t = 0; t < m->tet_slots; t++) {
             if (!ns_mesh_tet_alive(m, t))
                 continue;
-            int r = remap[m->tet_region[t]];
+            const int *hit =
+                bsearch(&m->tet_region[t], present, (size_t)count, sizeof *present, cmp_int);
+            int r = (int)(hit - present);
             m->tet_region[t] = r;
             if (sc->regions[r].fixed)
                 for (int k = 0; k < 4; k++)
                     m->flags[m->tet_node[4 * t + k]] |= NS_NODE_FIXED;
         }
     }
-    free(remap);
+    free(present);
     return rc;
 }
 

@@ -59,7 +59,8 @@ json_regions() {
 check_json() {
     local name=$1 file=$2 key missing="" v
     for key in scenario tets nodes regions min_dihedral_deg max_dihedral_deg min_quality \
-        boundary_closed boundary_manifold boundary_faces fixed_nodes junction_tets build_ms; do
+        boundary_closed boundary_manifold boundary_faces fixed_nodes junction_tets build_ms \
+        inverted_tets; do
         grep -q "^  \"$key\": " "$file" || missing="$missing $key"
     done
     if [ -n "$missing" ]; then
@@ -201,6 +202,14 @@ if [ "$t" -ge 10000 ] 2>/dev/null && [ "$t" -le 16000 ] &&
     pass "brachytherapy: $t tets, dihedral $lo..$hi deg, 7 regions, bone fixed"
 else
     fail "brachytherapy mesh bar" "tets $t, dihedral $lo..$hi"
+fi
+
+# A physical tag of 2^31 - 1 is legal and cheap (regression: the remap was indexed by tag).
+run check tests/data/huge_tag.lua --json
+if [ "$RC" = 0 ] && [ "$(json_value "$OUT" tets)" = 1 ]; then
+    pass "mesh with physical tag 2147483647"
+else
+    fail "mesh with physical tag 2147483647" "exit $RC"
 fi
 
 # two_cylinders: the rods are fixed regions, so there are fixed nodes.

@@ -622,7 +622,6 @@ static int test_errors(void)
     double c[3] = {0, 0, 0}, lo[3] = {-0.03, -0.03, -0.03}, hi[3] = {0.03, 0.03, 0.03};
     NsShape *nan = ns_shape_callback(nan_shape, NULL, lo, hi);
     NsShape *sphere = ns_shape_sphere(c, 0.02);
-    NsShape *tiny = ns_shape_sphere(c, 1e-4);
     NsMesherRegion region = {nan, false};
     NsMesherDef def = ns_default_mesher_def();
     def.spacing = 0.004;
@@ -658,7 +657,6 @@ static int test_errors(void)
         return 1;
     ns_shape_release(nan);
     ns_shape_release(sphere);
-    ns_shape_release(tiny);
     ns_shape_release(small);
     return 0;
 }
