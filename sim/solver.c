@@ -1,31 +1,145 @@
 /* Linear solvers behind one interface (§3.1 Eq. 5-6, §3.6.2): CG and Jacobi-PCG on the block
- * matrix, CHOLMOD supernodal Cholesky, and CG preconditioned by a stale Cholesky factor.
+ * matrix, CHOLMOD supernodal Cholesky, and CG preconditioned by a stale Cholesky factor that is
+ * refreshed on a background thread (solver.h).
  *
  * Fixed (Dirichlet) DOFs are removed by working on full-length vectors whose fixed entries are
  * held at zero in every search direction, after moving A_fc x_c to the right-hand side. The
  * CHOLMOD paths copy the free-free block into compressed-column form (upper triangle); the
- * symbolic analysis (METIS ordering) is redone only when the sparsity pattern changes. */
+ * symbolic analysis (METIS ordering) is redone only when the sparsity pattern changes, and kept
+ * apart (Lsym) so that a refactorization only copies it.
+ *
+ * Determinism (STYLE.md §8) across thread counts: the vector operations work on fixed chunks of
+ * CHUNK entries; a chunk is computed whole by one thread, and a dot product is the sum of the
+ * chunk partials taken in chunk order on the calling thread. */
 #include "solver.h"
 
+#include "ns_config.h"
+
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include <cholmod.h>
 
+#if NS_HAVE_OPENMP
+#include <omp.h>
+#endif
+
+#if NS_HAVE_OPENBLAS
+/* From OpenBLAS (declared here, as in engine/main.c, to avoid depending on its cblas.h). */
+void openblas_set_num_threads(int num_threads);
+#endif
+
+/* Entries per partial sum of a dot product. Fixed, so sums never depend on the thread count. */
+#define CHUNK 1024
+/* Vectors shorter than this stay on one thread: an operation on 4k entries takes about as long
+ * as waking the other threads. */
+#define PARALLEL_MIN (4 * CHUNK)
+
+/* A refactorization scheduled by a slow STALE_PCG solve, run by a worker thread (or by the
+ * scheduling solve itself with one thread) and adopted by solve adopt_at. While running is set,
+ * the worker owns cm, M and L, and reads `symbolic`; the solver touches none of them. */
+typedef struct RefreshJob {
+    int pending;      /* scheduled, not yet adopted or dropped */
+    int running;      /* a worker thread was started and not yet joined */
+    pthread_t thread; /* valid while running */
+    atomic_int done;  /* set by the worker when it finishes (only to lend its core back) */
+    long made_at;     /* the solve whose matrix is factored */
+    long adopt_at;    /* the solve that adopts the factor */
+    uint64_t pattern; /* pattern hash and free DOF count of that matrix */
+    int nfree;
+    cholmod_common cm; /* the worker's own: CHOLMOD is thread-safe with one common per thread */
+    int cm_started;
+    cholmod_sparse *M;        /* the matrix to factor; the worker frees it */
+    cholmod_factor *symbolic; /* the solver's Lsym, read-only while the job exists */
+    cholmod_factor *L; /* in: a numeric factor to overwrite, or NULL; out: the factor, or NULL
+                          if the factorization failed */
+} RefreshJob;
+
 struct NsSolver {
     NsSolverKind kind;
     int refresh_iterations;
+    int refresh_lag;
+    int threads;
+    long solves; /* solve calls so far; the clock of refreshes */
     cholmod_common cm;
     int cm_started;
-    cholmod_factor *L; /* factor of the last factorized matrix (possibly stale) */
-    uint64_t pattern;  /* hash of the pattern L was analyzed for */
-    int nfree;         /* scalar free DOFs L was built for */
-    int *dof;          /* (3n) free index of each scalar DOF, -1 if fixed */
+    cholmod_factor *Lsym;  /* symbolic analysis (ordering, supernodes) for `pattern` */
+    cholmod_factor *L;     /* numeric factor in use (possibly stale), NULL if none */
+    cholmod_factor *spare; /* a numeric factor of the same analysis no longer in use: the next
+                              factorization overwrites it rather than allocating (~10 ms of page
+                              faults for the box's 24 MB factor) */
+    long factor_solve;     /* the solve whose matrix L is the factor of */
+    uint64_t pattern;      /* hash of the pattern Lsym was analyzed for */
+    int nfree;             /* scalar free DOFs Lsym was built for */
+    RefreshJob job;
+    /* Dense vectors of cholmod_solve2, kept between solves (allocating them in every PCG
+     * iteration cost more than the triangular solves). */
+    cholmod_dense *B, *X, *Y, *E;
+    int *dof; /* (3n) free index of each scalar DOF, -1 if fixed */
     int dof_cap;
-    double *work; /* 5 vectors of 3n for CG */
+    double *work; /* 5 vectors of 3n for CG, then the chunk partial sums */
     int work_cap;
 };
+
+#if NS_HAVE_OPENBLAS
+static pthread_once_t blas_once = PTHREAD_ONCE_INIT;
+static void blas_one_thread(void)
+{
+    /* CHOLMOD's BLAS calls run on the thread that makes them; more BLAS threads would compete
+     * with a background refactorization and with our own loops for 2 cores. */
+    openblas_set_num_threads(1);
+}
+#endif
+
+/* CHOLMOD from 4.0 has a run-time thread limit (nthreads_max). CHOLMOD 3.0.14 (Debian 12) has
+ * none: its supernodal loops say num_threads(CHOLMOD_OMP_NUM_THREADS), 4 at compile time, which
+ * OMP_NUM_THREADS cannot lower (a factorization starts 3 more threads with OMP_NUM_THREADS=1),
+ * and they made the factorization slower on 2 cores: 44-52 ms against 32 ms (DESIGN.md); on the
+ * same 2-core box, here, ~100-180 ms against ~45-65 ms, and the analysis too. Allowing no
+ * active parallel level in the calling thread for the length of the call runs them on that
+ * thread alone. libgomp (GCC 11 on) keeps this setting per thread, so a background
+ * refactorization does not serialize our loops on the main thread. Without OpenMP in our build
+ * we cannot reach libgomp; OMP_THREAD_LIMIT=1 in the environment does the same then. */
+typedef struct OmpSerial {
+    int levels;
+} OmpSerial;
+
+static OmpSerial omp_serial_begin(void)
+{
+    OmpSerial o = {0};
+#if NS_HAVE_OPENMP && CHOLMOD_MAIN_VERSION < 4
+    o.levels = omp_get_max_active_levels();
+    omp_set_max_active_levels(0);
+#endif
+    return o;
+}
+
+static void omp_serial_end(OmpSerial o)
+{
+#if NS_HAVE_OPENMP && CHOLMOD_MAIN_VERSION < 4
+    omp_set_max_active_levels(o.levels);
+#else
+    (void)o;
+#endif
+}
+
+static void start_common(cholmod_common *cm)
+{
+    cholmod_start(cm);
+    cm->supernodal = CHOLMOD_SUPERNODAL;
+    /* One ordering, METIS nested dissection: the fill-reducing choice for 3D meshes. */
+    cm->nmethods = 1;
+    cm->method[0].ordering = CHOLMOD_METIS;
+    cm->postorder = 1;
+    cm->print = 0;
+    cm->error_handler = NULL;
+#if CHOLMOD_MAIN_VERSION >= 4
+    cm->nthreads_max = 1; /* see omp_serial_begin */
+#endif
+}
 
 const char *ns_solver_name(NsSolverKind kind)
 {
@@ -49,27 +163,63 @@ NsSolver *ns_solver_create(NsSolverKind kind)
         return NULL;
     s->kind = kind;
     s->refresh_iterations = 25;
+    s->refresh_lag = 2;
+    s->threads = 1;
+    atomic_init(&s->job.done, 0);
     if (kind == NS_SOLVER_DIRECT || kind == NS_SOLVER_STALE_PCG) {
-        cholmod_start(&s->cm);
+#if NS_HAVE_OPENBLAS
+        pthread_once(&blas_once, blas_one_thread);
+#endif
+        start_common(&s->cm);
         s->cm_started = 1;
-        s->cm.supernodal = CHOLMOD_SUPERNODAL;
-        /* One ordering, METIS nested dissection: the fill-reducing choice for 3D meshes. */
-        s->cm.nmethods = 1;
-        s->cm.method[0].ordering = CHOLMOD_METIS;
-        s->cm.postorder = 1;
-        s->cm.print = 0;
-        s->cm.error_handler = NULL;
     }
     return s;
+}
+
+/* Wait for the worker thread, if there is one. */
+static void job_join(NsSolver *s)
+{
+    if (s->job.running) {
+        pthread_join(s->job.thread, NULL);
+        s->job.running = 0;
+    }
+}
+
+/* Drop the pending refactorization, waiting for its thread. */
+static void job_cancel(NsSolver *s)
+{
+    RefreshJob *j = &s->job;
+    job_join(s);
+    if (j->M)
+        cholmod_free_sparse(&j->M, &j->cm);
+    if (j->L)
+        cholmod_free_factor(&j->L, &j->cm);
+    j->pending = 0;
+}
+
+static void free_factors(NsSolver *s)
+{
+    if (s->L)
+        cholmod_free_factor(&s->L, &s->cm);
+    if (s->spare)
+        cholmod_free_factor(&s->spare, &s->cm);
+    if (s->Lsym)
+        cholmod_free_factor(&s->Lsym, &s->cm);
 }
 
 void ns_solver_destroy(NsSolver *s)
 {
     if (!s)
         return;
+    job_cancel(s);
+    if (s->job.cm_started)
+        cholmod_finish(&s->job.cm);
     if (s->cm_started) {
-        if (s->L)
-            cholmod_free_factor(&s->L, &s->cm);
+        free_factors(s);
+        cholmod_free_dense(&s->B, &s->cm);
+        cholmod_free_dense(&s->X, &s->cm);
+        cholmod_free_dense(&s->Y, &s->cm);
+        cholmod_free_dense(&s->E, &s->cm);
         cholmod_finish(&s->cm);
     }
     free(s->dof);
@@ -82,15 +232,29 @@ NsSolverKind ns_solver_kind(const NsSolver *s)
     return s->kind;
 }
 
+void ns_solver_set_threads(NsSolver *s, int threads)
+{
+    s->threads = threads > 1 ? threads : 1;
+}
+
 void ns_solver_set_refresh_iterations(NsSolver *s, int iterations)
 {
     s->refresh_iterations = iterations > 0 ? iterations : 1;
 }
 
+void ns_solver_set_refresh_lag(NsSolver *s, int lag)
+{
+    s->refresh_lag = lag > 0 ? lag : 0;
+}
+
 void ns_solver_refresh(NsSolver *s)
 {
-    if (s->L)
+    job_cancel(s);
+    if (s->L && !s->spare)
+        s->spare = s->L; /* its memory is reused by the next factorization */
+    else if (s->L)
         cholmod_free_factor(&s->L, &s->cm);
+    s->L = NULL;
 }
 
 static int ensure(void **p, int *cap, int need, size_t elem)
@@ -131,13 +295,14 @@ static uint64_t pattern_hash(const NsBlockMatrix *A, const int *dof)
 
 /* The free-free block of A, upper triangle, compressed columns (row q = (J, c) of A gives
  * column q of the upper triangle by symmetry). */
-static cholmod_sparse *to_cholmod(NsSolver *s, const NsBlockMatrix *A, int nfree)
+static cholmod_sparse *to_cholmod(const NsBlockMatrix *A, const int *dof, int nfree,
+                                  cholmod_common *cm)
 {
     size_t nnz = 0;
     for (int J = 0; J < A->n; J++)
         nnz += (size_t)A->rows[J].count * 9;
     cholmod_sparse *M =
-        cholmod_allocate_sparse((size_t)nfree, (size_t)nfree, nnz, 1, 1, 1, CHOLMOD_REAL, &s->cm);
+        cholmod_allocate_sparse((size_t)nfree, (size_t)nfree, nnz, 1, 1, 1, CHOLMOD_REAL, cm);
     if (!M)
         return NULL;
     int *Ap = M->p, *Ai = M->i;
@@ -145,7 +310,7 @@ static cholmod_sparse *to_cholmod(NsSolver *s, const NsBlockMatrix *A, int nfree
     size_t k = 0;
     for (int J = 0; J < A->n; J++)
         for (int c = 0; c < 3; c++) {
-            int q = s->dof[3 * J + c];
+            int q = dof[3 * J + c];
             if (q < 0)
                 continue;
             Ap[q] = (int)k;
@@ -153,7 +318,7 @@ static cholmod_sparse *to_cholmod(NsSolver *s, const NsBlockMatrix *A, int nfree
             for (int e = 0; e < r->count; e++) {
                 int I = r->col[e];
                 for (int c2 = 0; c2 < 3; c2++) {
-                    int p = s->dof[3 * I + c2];
+                    int p = dof[3 * I + c2];
                     if (p < 0 || p > q)
                         continue;
                     Ai[k] = p;
@@ -166,18 +331,32 @@ static cholmod_sparse *to_cholmod(NsSolver *s, const NsBlockMatrix *A, int nfree
     return M;
 }
 
-/* Factor A's free block into s->L (analysis only if the pattern changed). */
-static int factorize(NsSolver *s, const NsBlockMatrix *A, int nfree, NsSolveStats *st)
+/* L = numeric Cholesky factor of M (L has M's analysis). Returns 0, or -1 if M is not
+ * positive definite or CHOLMOD failed. Safe on any thread that owns cm. */
+static int factor_numeric(cholmod_sparse *M, cholmod_factor *L, cholmod_common *cm)
 {
-    cholmod_sparse *M = to_cholmod(s, A, nfree);
+    OmpSerial o = omp_serial_begin();
+    int ok = cholmod_factorize(M, L, cm);
+    omp_serial_end(o);
+    return ok && cm->status == CHOLMOD_OK && L->minor >= M->nrow ? 0 : -1;
+}
+
+/* Factor A's free block into s->L, now, in this solve (analysis only if the pattern changed).
+ * A pending refactorization is dropped: this factor is newer. */
+static int factor_sync(NsSolver *s, const NsBlockMatrix *A, int nfree, uint64_t h, NsSolveStats *st)
+{
+    job_cancel(s);
+    cholmod_sparse *M = to_cholmod(A, s->dof, nfree, &s->cm);
     if (!M)
         return -1;
-    uint64_t h = pattern_hash(A, s->dof);
-    if (s->L && (h != s->pattern || nfree != s->nfree))
-        cholmod_free_factor(&s->L, &s->cm);
-    if (!s->L) {
-        s->L = cholmod_analyze(M, &s->cm);
-        if (!s->L || s->cm.status < CHOLMOD_OK) {
+    if (!s->Lsym || h != s->pattern || nfree != s->nfree) {
+        free_factors(s);
+        OmpSerial o = omp_serial_begin();
+        s->Lsym = cholmod_analyze(M, &s->cm);
+        omp_serial_end(o);
+        if (!s->Lsym || s->cm.status < CHOLMOD_OK) {
+            if (s->Lsym)
+                cholmod_free_factor(&s->Lsym, &s->cm);
             cholmod_free_sparse(&M, &s->cm);
             return -1;
         }
@@ -185,73 +364,254 @@ static int factorize(NsSolver *s, const NsBlockMatrix *A, int nfree, NsSolveStat
         s->nfree = nfree;
         st->analyzed = 1;
     }
-    int ok = cholmod_factorize(M, s->L, &s->cm);
+    if (!s->L) {
+        s->L = s->spare ? s->spare : cholmod_copy_factor(s->Lsym, &s->cm);
+        s->spare = NULL;
+    }
+    int rc = s->L ? factor_numeric(M, s->L, &s->cm) : -1;
     cholmod_free_sparse(&M, &s->cm);
     st->factorized = 1;
-    if (!ok || s->cm.status != CHOLMOD_OK || s->L->minor < (size_t)nfree) {
-        cholmod_free_factor(&s->L, &s->cm);
+    if (rc) {
+        if (s->L)
+            cholmod_free_factor(&s->L, &s->cm);
         return -1;
     }
+    s->factor_solve = s->solves;
     return 0;
+}
+
+static void *job_main(void *arg)
+{
+    RefreshJob *j = arg;
+    cholmod_factor *L = j->L ? j->L : cholmod_copy_factor(j->symbolic, &j->cm);
+    if (L && factor_numeric(j->M, L, &j->cm))
+        cholmod_free_factor(&L, &j->cm);
+    cholmod_free_sparse(&j->M, &j->cm);
+    j->L = L;
+    atomic_store_explicit(&j->done, 1, memory_order_release);
+    return NULL;
+}
+
+/* Schedule the refactorization of A (this solve's matrix, whose pattern s->Lsym has): on a
+ * worker thread with 2 or more threads, else right here; adopted refresh_lag solves later. */
+static void job_start(NsSolver *s, const NsBlockMatrix *A, int nfree, NsSolveStats *st)
+{
+    RefreshJob *j = &s->job;
+    if (!j->cm_started) {
+        start_common(&j->cm);
+        j->cm_started = 1;
+    }
+    j->M = to_cholmod(A, s->dof, nfree, &j->cm);
+    if (!j->M)
+        return; /* out of memory: keep the stale factor */
+    j->symbolic = s->Lsym;
+    j->L = s->spare;
+    s->spare = NULL;
+    j->pattern = s->pattern;
+    j->nfree = s->nfree;
+    j->made_at = s->solves;
+    j->adopt_at = s->solves + s->refresh_lag;
+    atomic_store_explicit(&j->done, 0, memory_order_relaxed);
+    j->pending = 1;
+    st->refresh_started = 1;
+    if (s->threads > 1 && pthread_create(&j->thread, NULL, job_main, j) == 0)
+        j->running = 1;
+    else
+        job_main(j); /* the same factor, made now: results do not change */
+}
+
+/* Switch to the factor of the pending job (waiting for it), if it is for the current analysis
+ * and pattern h / nfree. A failed factorization leaves the stale factor in use. */
+static void job_adopt(NsSolver *s, uint64_t h, int nfree, NsSolveStats *st)
+{
+    RefreshJob *j = &s->job;
+    job_join(s);
+    if (j->L && j->pattern == h && j->nfree == nfree && s->Lsym && s->pattern == h &&
+        s->nfree == nfree) {
+        if (s->spare)
+            cholmod_free_factor(&s->spare, &s->cm);
+        s->spare = s->L;
+        s->L = j->L;
+        j->L = NULL;
+        s->factor_solve = j->made_at;
+        st->refresh_adopted = 1;
+    }
+    job_cancel(s); /* frees whatever was not adopted */
+}
+
+/* Threads for our loops now: a refactorization running in the background has a core of its
+ * own, so leave it that one. The results do not depend on this. */
+static int loop_threads(const NsSolver *s)
+{
+    int nt = s->threads;
+    if (nt > 1 && s->job.running && !atomic_load_explicit(&s->job.done, memory_order_relaxed))
+        nt--;
+    return nt;
 }
 
 /* z = L^-1 r on the free DOFs of full-length vectors. */
 static int apply_factor(NsSolver *s, int n3, const double *r, double *z)
 {
-    cholmod_dense *B =
-        cholmod_allocate_dense((size_t)s->nfree, 1, (size_t)s->nfree, CHOLMOD_REAL, &s->cm);
-    if (!B)
-        return -1;
-    double *bx = B->x;
+    if (s->B && s->B->nrow != (size_t)s->nfree)
+        cholmod_free_dense(&s->B, &s->cm);
+    if (!s->B) {
+        s->B = cholmod_allocate_dense((size_t)s->nfree, 1, (size_t)s->nfree, CHOLMOD_REAL, &s->cm);
+        if (!s->B)
+            return -1;
+    }
+    double *bx = s->B->x;
     for (int i = 0; i < n3; i++)
         if (s->dof[i] >= 0)
             bx[s->dof[i]] = r[i];
-    cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, B, &s->cm);
-    cholmod_free_dense(&B, &s->cm);
-    if (!X)
+    /* X, Y and E are (re)allocated by CHOLMOD only when their shape must change. */
+    if (!cholmod_solve2(CHOLMOD_A, s->L, s->B, NULL, &s->X, NULL, &s->Y, &s->E, &s->cm))
         return -1;
-    const double *xx = X->x;
+    const double *xx = s->X->x;
     for (int i = 0; i < n3; i++)
         z[i] = s->dof[i] >= 0 ? xx[s->dof[i]] : 0.0;
-    cholmod_free_dense(&X, &s->cm);
     return 0;
 }
 
-static double dot_free(const int *dof, int n3, const double *a, const double *b)
+/* Vector operations of CG over full-length vectors, free DOFs only (fixed entries are 0 in the
+ * outputs, except x's, which are kept). Each returns a sum of its chunk partials (0 if none). */
+typedef enum VecOp {
+    VEC_DOT,       /* sum a.b */
+    VEC_RESIDUAL,  /* out = a - b; sum out.out */
+    VEC_FIXED,     /* out = a on fixed DOFs, 0 on free ones */
+    VEC_SCALE,     /* out = a * b (Jacobi: z = D^-1 r); sum b.out */
+    VEC_COPY,      /* out = a; sum a.a */
+    VEC_DIRECTION, /* out = a + alpha out (p = z + beta p) */
+    VEC_STEP,      /* out += alpha a, out2 -= alpha b (x += alpha p, r -= alpha q); sum out2^2 */
+    VEC_ADD,       /* out += a */
+} VecOp;
+
+typedef struct VecTask {
+    VecOp op;
+    int n;          /* vector length (3 x nodes) */
+    const int *dof; /* (n) free index, -1 if fixed */
+    double *out, *out2;
+    const double *a, *b;
+    double alpha;
+    double *part; /* (chunks) partial sums */
+} VecTask;
+
+static void vec_chunk(const VecTask *t, int c)
 {
-    double d = 0.0;
-    for (int i = 0; i < n3; i++)
-        if (dof[i] >= 0)
-            d += a[i] * b[i];
-    return d;
+    int lo = c * CHUNK, hi = lo + CHUNK < t->n ? lo + CHUNK : t->n;
+    const int *dof = t->dof;
+    const double *a = t->a, *b = t->b;
+    double *out = t->out, *out2 = t->out2, alpha = t->alpha, sum = 0.0;
+    switch (t->op) {
+    case VEC_DOT:
+        for (int i = lo; i < hi; i++)
+            if (dof[i] >= 0)
+                sum += a[i] * b[i];
+        break;
+    case VEC_RESIDUAL:
+        for (int i = lo; i < hi; i++) {
+            out[i] = dof[i] >= 0 ? a[i] - b[i] : 0.0;
+            if (dof[i] >= 0)
+                sum += out[i] * out[i];
+        }
+        break;
+    case VEC_FIXED:
+        for (int i = lo; i < hi; i++)
+            out[i] = dof[i] >= 0 ? 0.0 : a[i];
+        break;
+    case VEC_SCALE:
+        for (int i = lo; i < hi; i++) {
+            out[i] = dof[i] >= 0 ? a[i] * b[i] : 0.0;
+            if (dof[i] >= 0)
+                sum += b[i] * out[i];
+        }
+        break;
+    case VEC_COPY:
+        for (int i = lo; i < hi; i++) {
+            out[i] = dof[i] >= 0 ? a[i] : 0.0;
+            if (dof[i] >= 0)
+                sum += a[i] * a[i];
+        }
+        break;
+    case VEC_DIRECTION:
+        for (int i = lo; i < hi; i++)
+            out[i] = a[i] + alpha * out[i];
+        break;
+    case VEC_STEP:
+        for (int i = lo; i < hi; i++)
+            if (dof[i] >= 0) {
+                out[i] += alpha * a[i];
+                out2[i] -= alpha * b[i];
+                sum += out2[i] * out2[i];
+            }
+        break;
+    case VEC_ADD:
+        for (int i = lo; i < hi; i++)
+            if (dof[i] >= 0)
+                out[i] += a[i];
+        break;
+    }
+    t->part[c] = sum;
+}
+
+static double vec_run(const VecTask *t, int threads)
+{
+    int chunks = (t->n + CHUNK - 1) / CHUNK;
+#if NS_HAVE_OPENMP
+    if (threads > 1 && t->n >= PARALLEL_MIN) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+        for (int c = 0; c < chunks; c++)
+            vec_chunk(t, c);
+    } else
+#else
+    (void)threads;
+#endif
+    {
+        for (int c = 0; c < chunks; c++)
+            vec_chunk(t, c);
+    }
+    double sum = 0.0;
+    for (int c = 0; c < chunks; c++)
+        sum += t->part[c];
+    return sum;
+}
+
+/* One vector operation with up to s's loop threads (see VecOp for what a, b, out mean). */
+static double vec(NsSolver *s, VecOp op, int n3, double *out, double *out2, const double *a,
+                  const double *b, double alpha)
+{
+    VecTask t = {op, n3, s->dof, out, out2, a, b, alpha, s->work + 5 * (size_t)n3};
+    return vec_run(&t, loop_threads(s));
 }
 
 int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *node_fixed, const double *b,
                     double *x, double tol, int max_iter, NsSolveStats *stats)
 {
-    NsSolveStats st = {0, 0.0, 0, 0, 0};
+    NsSolveStats st = {0};
+    st.factor_age = -1;
+    s->solves++;
     int n3 = 3 * A->n;
     int nfree = number_dofs(s, A->n, node_fixed);
     if (nfree < 0)
         return -1;
-    if (ensure((void **)&s->work, &s->work_cap, 5 * (n3 > 0 ? n3 : 1), sizeof(double)))
+    int chunks = (n3 + CHUNK - 1) / CHUNK;
+    if (ensure((void **)&s->work, &s->work_cap, 5 * n3 + (chunks > 0 ? chunks : 1), sizeof(double)))
         return -1;
     double *r = s->work, *z = r + n3, *p = z + n3, *q = p + n3, *diag = q + n3;
     const int *dof = s->dof;
+    uint64_t h = 0;
+    if (s->kind == NS_SOLVER_DIRECT || s->kind == NS_SOLVER_STALE_PCG)
+        h = pattern_hash(A, dof);
+    /* A scheduled refactorization is adopted at its solve whatever happens in it. */
+    if (s->job.pending && s->solves >= s->job.adopt_at)
+        job_adopt(s, h, nfree, &st);
 
     /* r = b - A x over free DOFs (fixed entries of x act through A_fc). */
-    ns_bsm_mul(A, x, q);
-    for (int i = 0; i < n3; i++)
-        r[i] = dof[i] >= 0 ? b[i] - q[i] : 0.0;
+    ns_bsm_mul_threads(A, x, q, loop_threads(s));
+    vec(s, VEC_RESIDUAL, n3, r, NULL, b, q, 0.0);
     /* The reference norm: b_f - A_fc x_c, i.e. the residual at x_f = 0. */
-    for (int i = 0; i < n3; i++)
-        p[i] = dof[i] >= 0 ? 0.0 : x[i];
-    ns_bsm_mul(A, p, q);
-    double bnorm = 0.0;
-    for (int i = 0; i < n3; i++)
-        if (dof[i] >= 0)
-            bnorm += (b[i] - q[i]) * (b[i] - q[i]);
-    bnorm = sqrt(bnorm);
+    vec(s, VEC_FIXED, n3, p, NULL, x, NULL, 0.0);
+    ns_bsm_mul_threads(A, p, q, loop_threads(s));
+    double bnorm = sqrt(vec(s, VEC_RESIDUAL, n3, z, NULL, b, q, 0.0));
     if (bnorm == 0.0) {
         for (int i = 0; i < n3; i++)
             if (dof[i] >= 0)
@@ -263,20 +623,15 @@ int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *node_fix
     }
 
     if (s->kind == NS_SOLVER_DIRECT) {
-        if (factorize(s, A, nfree, &st) || apply_factor(s, n3, r, z)) {
+        if (factor_sync(s, A, nfree, h, &st) || apply_factor(s, n3, r, z)) {
             if (stats)
                 *stats = st;
             return -1;
         }
-        for (int i = 0; i < n3; i++)
-            if (dof[i] >= 0)
-                x[i] += z[i];
-        ns_bsm_mul(A, x, q);
-        double rr = 0.0;
-        for (int i = 0; i < n3; i++)
-            if (dof[i] >= 0)
-                rr += (b[i] - q[i]) * (b[i] - q[i]);
-        st.residual = sqrt(rr) / bnorm;
+        st.factor_age = 0;
+        vec(s, VEC_ADD, n3, x, NULL, z, NULL, 0.0);
+        ns_bsm_mul_threads(A, x, q, loop_threads(s));
+        st.residual = sqrt(vec(s, VEC_RESIDUAL, n3, z, NULL, b, q, 0.0)) / bnorm;
         st.converged = st.residual <= tol || tol <= 0.0;
         if (stats)
             *stats = st;
@@ -284,9 +639,8 @@ int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *node_fix
     }
 
     if (s->kind == NS_SOLVER_STALE_PCG) {
-        uint64_t h = pattern_hash(A, dof);
         if (!s->L || h != s->pattern || nfree != s->nfree)
-            if (factorize(s, A, nfree, &st)) {
+            if (factor_sync(s, A, nfree, h, &st)) {
                 if (stats)
                     *stats = st;
                 return -1;
@@ -302,56 +656,54 @@ int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *node_fix
     /* Preconditioned conjugate gradients, warm-started from x. */
     int retried = 0;
 restart:;
-    double rnorm = sqrt(dot_free(dof, n3, r, r));
+    double rnorm = sqrt(vec(s, VEC_DOT, n3, NULL, NULL, r, r, 0.0));
     int it = 0;
     double rz = 0.0;
     while (rnorm > tol * bnorm && it < max_iter) {
+        double rz_new;
         if (s->kind == NS_SOLVER_STALE_PCG) {
             if (apply_factor(s, n3, r, z)) {
                 if (stats)
                     *stats = st;
                 return -1;
             }
+            rz_new = vec(s, VEC_DOT, n3, NULL, NULL, r, z, 0.0);
         } else if (s->kind == NS_SOLVER_JACOBI_PCG) {
-            for (int i = 0; i < n3; i++)
-                z[i] = dof[i] >= 0 ? diag[i] * r[i] : 0.0;
+            rz_new = vec(s, VEC_SCALE, n3, z, NULL, diag, r, 0.0);
         } else {
-            memcpy(z, r, (size_t)n3 * sizeof(double));
+            rz_new = vec(s, VEC_COPY, n3, z, NULL, r, NULL, 0.0);
         }
-        double rz_new = dot_free(dof, n3, r, z);
-        if (it == 0) {
+        if (it == 0)
             memcpy(p, z, (size_t)n3 * sizeof(double));
-        } else {
-            double beta = rz_new / rz;
-            for (int i = 0; i < n3; i++)
-                p[i] = z[i] + beta * p[i];
-        }
+        else
+            vec(s, VEC_DIRECTION, n3, p, NULL, z, NULL, rz_new / rz);
         rz = rz_new;
-        ns_bsm_mul(A, p, q);
-        double pq = dot_free(dof, n3, p, q);
+        ns_bsm_mul_threads(A, p, q, loop_threads(s));
+        double pq = vec(s, VEC_DOT, n3, NULL, NULL, p, q, 0.0);
         if (!(pq > 0.0))
             break; /* not positive definite along p: stop, report unconverged */
         double alpha = rz / pq;
-        for (int i = 0; i < n3; i++)
-            if (dof[i] >= 0) {
-                x[i] += alpha * p[i];
-                r[i] -= alpha * q[i];
-            }
-        rnorm = sqrt(dot_free(dof, n3, r, r));
+        rnorm = sqrt(vec(s, VEC_STEP, n3, x, r, p, q, alpha));
         it++;
     }
     st.iterations += it;
-    /* A stale factor that no longer preconditions well is replaced, and the solve finished
-     * with the fresh one (DESIGN.md: refresh when iterations grow). */
-    if (s->kind == NS_SOLVER_STALE_PCG && !retried &&
-        (it > s->refresh_iterations || rnorm > tol * bnorm) && !st.factorized) {
-        retried = 1;
-        if (factorize(s, A, nfree, &st) == 0) {
-            ns_bsm_mul(A, x, q);
-            for (int i = 0; i < n3; i++)
-                r[i] = dof[i] >= 0 ? b[i] - q[i] : 0.0;
-            goto restart;
+    if (s->kind == NS_SOLVER_STALE_PCG) {
+        int converged = rnorm <= tol * bnorm;
+        int slow = it > s->refresh_iterations;
+        if (!retried && !st.factorized && (!converged || (slow && s->refresh_lag == 0))) {
+            /* The stale factor failed (or a synchronous refresh was asked for): factor this
+             * matrix now and finish the solve with it. */
+            retried = 1;
+            if (factor_sync(s, A, nfree, h, &st) == 0) {
+                ns_bsm_mul_threads(A, x, q, loop_threads(s));
+                vec(s, VEC_RESIDUAL, n3, r, NULL, b, q, 0.0);
+                goto restart;
+            }
+        } else if (converged && slow && !st.factorized && !s->job.pending) {
+            job_start(s, A, nfree, &st);
         }
+        if (s->L)
+            st.factor_age = (int)(s->solves - s->factor_solve);
     }
     st.residual = rnorm / bnorm;
     st.converged = rnorm <= tol * bnorm;

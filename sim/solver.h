@@ -3,12 +3,34 @@
  *   CG          conjugate gradients, warm-started from x (the paper's choice, §3.6.2)
  *   JACOBI_PCG  the same with the diagonal as preconditioner
  *   DIRECT      CHOLMOD supernodal Cholesky of the current matrix
- *   STALE_PCG   CG preconditioned by a Cholesky factor of an *earlier* matrix, refactored when
- *               the iteration count grows past refresh_iterations (DESIGN.md: 3-19 iterations
- *               for the changes a step makes, against ~200 for plain CG)
+ *   STALE_PCG   CG preconditioned by a Cholesky factor of an *earlier* matrix (DESIGN.md: 3-19
+ *               iterations for the changes a step makes, against ~200 for plain CG)
  * Fixed DOFs are Dirichlet: their entries of x are kept as given, and the system is solved
  * for the others (A_ff x_f = b_f - A_fc x_c). A DOF mask (not a node mask) lets a node slide
- * along a plane (fixed in one direction, free in the others). */
+ * along a plane (fixed in one direction, free in the others).
+ *
+ * Threads (ns_solver_set_threads, default 1). The SpMV and the vector operations of CG run on
+ * up to that many OpenMP threads, and x is bit-identical for every thread count: a row of the
+ * product is summed by one thread in column order, and every dot product is the sum of fixed
+ * 1024-entry chunk partials added in chunk order, whichever thread computed them. CHOLMOD and
+ * BLAS run on one thread: CHOLMOD 3.0's own OpenMP loops (num_threads(4), fixed at compile time,
+ * so OMP_NUM_THREADS does not reach them) made its factorization slower on 2 cores, 44-52 ms
+ * against 32 ms (DESIGN.md).
+ *
+ * Refreshing a stale factor in the background (STALE_PCG). A factorization (~32 ms on the
+ * 13k-tet box) costs several stale-PCG solves (3-19 iterations, ~5-30 ms; DESIGN.md), and the
+ * second core is idle during the serial parts of a step. So when a solve converges but needs
+ * more than refresh_iterations iterations, the solver copies that solve's matrix and factors it
+ * on a background thread (its own cholmod_common, the symbolic analysis reused), while the
+ * following solves keep the old factor. The new factor is adopted by the refresh_lag-th solve
+ * after the one that scheduled it (default 2), which waits for the thread if it is not done.
+ * The adoption point depends only on the count of solve calls, never on timing, so every
+ * result is bit-identical whether the factorization ran in the background or not: with one
+ * thread it is made synchronously by the scheduling solve and still adopted refresh_lag solves
+ * later. A factor is made synchronously, in the solve that needs it (any pending refresh is
+ * waited for and dropped), when there is none, when the pattern or the fixed DOFs changed, or
+ * when the stale one failed to reach tol within max_iter (the solve then restarts with it).
+ * refresh_lag 0 refactors synchronously as soon as a solve is slow and re-solves. */
 #ifndef NS_SOLVER_H
 #define NS_SOLVER_H
 
@@ -24,23 +46,37 @@ typedef enum NsSolverKind {
 } NsSolverKind;
 
 typedef struct NsSolveStats {
-    int iterations;  /* CG iterations (0 for DIRECT) */
-    double residual; /* final ||b - A x|| / ||b|| over free DOFs */
-    int converged;   /* residual <= tol */
-    int factorized;  /* a numeric factorization was made in this solve */
-    int analyzed;    /* a symbolic analysis (ordering) was made in this solve */
+    int iterations;      /* CG iterations (0 for DIRECT) */
+    double residual;     /* final ||b - A x|| / ||b|| over free DOFs */
+    int converged;       /* residual <= tol */
+    int factorized;      /* a numeric factorization of this solve's matrix was made and used in
+                          * this solve (not a scheduled refresh, even one made here with one
+                          * thread: that is refresh_started) */
+    int analyzed;        /* a symbolic analysis (ordering) was made in this solve */
+    int refresh_started; /* STALE_PCG: this solve scheduled a refactorization of its matrix */
+    int refresh_adopted; /* STALE_PCG: this solve switched to a factor scheduled earlier */
+    int factor_age;      /* solves since the matrix of the factor used was given (0: this
+                          * solve's own); -1 for CG and JACOBI_PCG */
 } NsSolveStats;
 
 typedef struct NsSolver NsSolver;
 
 NsSolver *ns_solver_create(NsSolverKind kind);
+/* Waits for a background refactorization, if one is running. */
 void ns_solver_destroy(NsSolver *s);
 NsSolverKind ns_solver_kind(const NsSolver *s);
 const char *ns_solver_name(NsSolverKind kind);
 
+/* Threads for the SpMV and vector operations and, if 2 or more, a background thread for
+ * STALE_PCG's refactorizations (default 1). Results do not depend on it. */
+void ns_solver_set_threads(NsSolver *s, int threads);
 /* For STALE_PCG: refactor when a solve needs more iterations than this (default 25). */
 void ns_solver_set_refresh_iterations(NsSolver *s, int iterations);
-/* Drop the factor: the next DIRECT / STALE_PCG solve factors the matrix it is given. */
+/* For STALE_PCG: a refactorization scheduled by solve k is used from solve k + lag on
+ * (default 2; 0: refactor synchronously and re-solve). */
+void ns_solver_set_refresh_lag(NsSolver *s, int lag);
+/* Drop the factor and any pending refactorization (waiting for its thread): the next DIRECT /
+ * STALE_PCG solve factors the matrix it is given. */
 void ns_solver_refresh(NsSolver *s);
 
 /* Solves A x = b. dof_fixed (3n entries, may be NULL) marks Dirichlet DOFs. x holds the

@@ -42,7 +42,12 @@ void ns_bsm_zero_node(NsBlockMatrix *m, int i);
 void ns_bsm_prune(NsBlockMatrix *m);
 int ns_bsm_block_count(const NsBlockMatrix *m);
 
-/* y = A x (length 3n). */
+/* y = A x (length 3n), on the calling thread. */
 void ns_bsm_mul(const NsBlockMatrix *m, const double *x, double *y);
+/* The same product with up to `threads` OpenMP threads (one below NS_BSM_PARALLEL_MIN_ROWS
+ * block rows, or without OpenMP). Each row is summed in column order by one thread, so y is
+ * bit-identical to ns_bsm_mul's for every thread count. */
+#define NS_BSM_PARALLEL_MIN_ROWS 512
+void ns_bsm_mul_threads(const NsBlockMatrix *m, const double *x, double *y, int threads);
 
 #endif

@@ -6,10 +6,14 @@
 
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 /* An SPD block matrix on an m^3 grid: for each grid edge (i, j) with weight w and direction d,
- * add w (I + k d d^T) to (i,i), (j,j) and subtract it from (i,j), (j,i); plus a mass shift. */
-static void grid_matrix(NsBlockMatrix *A, int m, double stiff_scale, double mass)
+ * add w (I + k d d^T) to (i,i), (j,j) and subtract it from (i,j), (j,i); plus a mass shift.
+ * drift != 0 scales each edge's weight by its own factor exp(drift sin(0.7 i + 0.3 j)), a local
+ * change that a factor of the drift-0 matrix preconditions less and less well. */
+static void grid_matrix_drift(NsBlockMatrix *A, int m, double stiff_scale, double mass,
+                              double drift)
 {
     int n = m * m * m;
     ns_bsm_init(A);
@@ -25,7 +29,8 @@ static void grid_matrix(NsBlockMatrix *A, int m, double stiff_scale, double mass
                     if (nb[d][0] >= m || nb[d][1] >= m || nb[d][2] >= m)
                         continue;
                     int j = nb[d][0] + m * (nb[d][1] + m * nb[d][2]);
-                    double w = stiff_scale * (1.0 + 0.5 * ((i * 7 + j * 3) % 5));
+                    double w = stiff_scale * (1.0 + 0.5 * ((i * 7 + j * 3) % 5)) *
+                               exp(drift * sin(0.7 * i + 0.3 * j));
                     double B[9] = {w, 0, 0, 0, w, 0, 0, 0, w}, N[9];
                     B[4 * d] += 2.0 * w;
                     for (int k = 0; k < 9; k++)
@@ -36,6 +41,11 @@ static void grid_matrix(NsBlockMatrix *A, int m, double stiff_scale, double mass
                     ns_bsm_add(A, j, i, N);
                 }
             }
+}
+
+static void grid_matrix(NsBlockMatrix *A, int m, double stiff_scale, double mass)
+{
+    grid_matrix_drift(A, m, stiff_scale, mass, 0.0);
 }
 
 /* True residual ||b_f - A x||, relative to ||b_f - A_fc x_c|| (the solvers' reference). */
@@ -146,5 +156,230 @@ static int stale_factor_preconditions_and_refreshes(void)
     return 0;
 }
 
+/* A sequence of solves as a time stepper makes them: matrix k drifts away from matrix 0
+ * (edge weights by up to exp(+-0.06 k), the diagonal by 5 k), the right-hand side changes a
+ * little, and x is warm-started from the previous solution. Every x is kept (xs: solves x 3n)
+ * with its stats; every solve must converge to tol. */
+typedef struct SeqRun {
+    NsSolverKind kind;
+    int threads;
+    int lag;     /* refresh_lag; -1 for the default */
+    int refresh; /* refresh_iterations */
+    int m;       /* grid side (m^3 nodes) */
+    int solves;
+    double *xs;
+    NsSolveStats *st;
+} SeqRun;
+
+#define SEQ_TOL 1e-8
+
+static int run_sequence(SeqRun *run)
+{
+    const int m = run->m, n = m * m * m, n3 = 3 * n;
+    uint8_t *fixed = calloc((size_t)n3, 1);
+    for (int i = 0; i < 3 * m * m; i++)
+        fixed[i] = 1; /* the z = 0 face is clamped */
+    double *b = malloc((size_t)n3 * sizeof(double)), *x = calloc((size_t)n3, sizeof(double));
+    NsSolver *s = ns_solver_create(run->kind);
+    ns_solver_set_threads(s, run->threads);
+    ns_solver_set_refresh_iterations(s, run->refresh);
+    if (run->lag >= 0)
+        ns_solver_set_refresh_lag(s, run->lag);
+    run->xs = malloc((size_t)run->solves * n3 * sizeof(double));
+    run->st = calloc((size_t)run->solves, sizeof(NsSolveStats));
+    for (int k = 0; k < run->solves; k++) {
+        NsBlockMatrix A;
+        grid_matrix_drift(&A, m, 1e3, 1.0 + 5.0 * k, 0.06 * k);
+        for (int i = 0; i < n3; i++)
+            b[i] = sin(0.37 * i + 0.05 * k) + 0.1;
+        ENSURE(ns_solver_solve(s, &A, fixed, b, x, SEQ_TOL, 5000, &run->st[k]) == 0);
+        ENSURE(run->st[k].converged);
+        ENSURE(residual(&A, fixed, b, x) < 10 * SEQ_TOL); /* CG's recursive residual drifts */
+        memcpy(run->xs + (size_t)k * n3, x, (size_t)n3 * sizeof(double));
+        ns_bsm_free(&A);
+    }
+    ns_solver_destroy(s);
+    free(fixed);
+    free(b);
+    free(x);
+    return 0;
+}
+
+static void free_run(SeqRun *run)
+{
+    free(run->xs);
+    free(run->st);
+}
+
+/* Two runs made the same solves: bit-identical x, and the same iterations and refresh events. */
+static int same_runs(const SeqRun *a, const SeqRun *b)
+{
+    size_t n3 = 3 * (size_t)a->m * a->m * a->m;
+    ENSURE(memcmp(a->xs, b->xs, (size_t)a->solves * n3 * sizeof(double)) == 0);
+    for (int k = 0; k < a->solves; k++) {
+        const NsSolveStats *p = &a->st[k], *q = &b->st[k];
+        ENSURE(p->iterations == q->iterations && p->residual == q->residual);
+        ENSURE(p->factorized == q->factorized && p->analyzed == q->analyzed);
+        ENSURE(p->refresh_started == q->refresh_started);
+        ENSURE(p->refresh_adopted == q->refresh_adopted && p->factor_age == q->factor_age);
+    }
+    return 0;
+}
+
+/* STYLE.md §8: the thread count must not change a bit of the result. The 12^3 grid (5184 DOF)
+ * is large enough for the parallel paths of the SpMV and of the vector operations. */
+static int threads_give_identical_iterates(void)
+{
+    const NsSolverKind kinds[3] = {NS_SOLVER_CG, NS_SOLVER_JACOBI_PCG, NS_SOLVER_STALE_PCG};
+    for (int k = 0; k < 3; k++) {
+        SeqRun one = {kinds[k], 1, -1, 4, 12, 6, NULL, NULL};
+        ENSURE(run_sequence(&one) == 0);
+        for (int threads = 2; threads <= 3; threads++) {
+            SeqRun more = {kinds[k], threads, -1, 4, 12, 6, NULL, NULL};
+            ENSURE(run_sequence(&more) == 0);
+            ENSURE(same_runs(&one, &more) == 0);
+            free_run(&more);
+        }
+        int its = 0;
+        for (int i = 0; i < one.solves; i++)
+            its += one.st[i].iterations;
+        printf("  %-10s %d iterations in %d solves, identical for 1, 2 and 3 threads\n",
+               ns_solver_name(kinds[k]), its, one.solves);
+        free_run(&one);
+    }
+    return 0;
+}
+
+/* A slow stale-PCG solve schedules a refactorization of its matrix; the factor is adopted by
+ * exactly the lag-th solve after it, the iterations drop there, and the whole run is
+ * bit-identical whether the factorization ran in the background (2 threads) or in the
+ * scheduling solve (1 thread). */
+static int background_refresh_adopted_on_schedule(void)
+{
+    const int lags[3] = {-1, 1, 3}; /* -1: the default, 2 */
+    for (int l = 0; l < 3; l++) {
+        int lag = lags[l] < 0 ? 2 : lags[l];
+        SeqRun bg = {NS_SOLVER_STALE_PCG, 2, lags[l], 4, 10, 14, NULL, NULL};
+        SeqRun fg = {NS_SOLVER_STALE_PCG, 1, lags[l], 4, 10, 14, NULL, NULL};
+        SeqRun never = {NS_SOLVER_STALE_PCG, 1, lags[l], 1000, 10, 14, NULL, NULL};
+        ENSURE(run_sequence(&bg) == 0);
+        ENSURE(run_sequence(&fg) == 0);
+        ENSURE(run_sequence(&never) == 0);
+        ENSURE(same_runs(&bg, &fg) == 0);
+        const NsSolveStats *st = bg.st;
+        ENSURE(st[0].factorized && st[0].analyzed && st[0].factor_age == 0);
+        int started = 0, adopted = 0, pending_since = -1;
+        printf("  lag %d:", lag);
+        for (int k = 0; k < bg.solves; k++) {
+            printf(" %d%s%s", st[k].iterations, st[k].refresh_started ? "s" : "",
+                   st[k].refresh_adopted ? "a" : "");
+            ENSURE(k == 0 || !st[k].factorized); /* no synchronous factorization after the first */
+            if (pending_since >= 0 && k == pending_since + lag) {
+                ENSURE(st[k].refresh_adopted);
+                ENSURE(st[k].factor_age == lag);
+                /* The fresher factor needs fewer iterations than the first one still would. */
+                ENSURE(st[k].iterations < never.st[k].iterations);
+                pending_since = -1;
+                adopted++;
+            } else {
+                ENSURE(!st[k].refresh_adopted);
+            }
+            if (k > 0 && !st[k].refresh_adopted)
+                ENSURE(st[k].factor_age == st[k - 1].factor_age + 1);
+            if (st[k].refresh_started) {
+                ENSURE(pending_since < 0); /* one refresh at a time */
+                ENSURE(st[k].iterations > 4);
+                pending_since = k;
+                started++;
+            } else if (pending_since < 0) {
+                ENSURE(st[k].iterations <= 4); /* a slow solve always schedules one */
+            }
+        }
+        printf("  (s: refresh started, a: adopted)\n");
+        ENSURE(started >= 2 && adopted >= 2);
+        free_run(&bg);
+        free_run(&fg);
+        free_run(&never);
+    }
+    /* lag 0: the slow solve refactors its own matrix and finishes with the new factor. */
+    SeqRun sync = {NS_SOLVER_STALE_PCG, 2, 0, 4, 10, 8, NULL, NULL};
+    ENSURE(run_sequence(&sync) == 0);
+    int refactored = 0;
+    for (int k = 0; k < sync.solves; k++) {
+        const NsSolveStats *st = &sync.st[k];
+        ENSURE(!st->refresh_started && !st->refresh_adopted);
+        if (st->factorized)
+            refactored++;
+        ENSURE(st->factorized ? st->factor_age == 0 : st->iterations <= 4);
+    }
+    ENSURE(refactored >= 3);
+    free_run(&sync);
+    return 0;
+}
+
+/* The synchronous paths drop a pending refresh: a solve that the stale factor cannot finish
+ * within max_iter, a change of the fixed DOFs (pattern), ns_solver_refresh; and destroying the
+ * solver waits for a running refactorization. */
+static int fallbacks_drop_pending_refresh(void)
+{
+    const int m = 10, n = m * m * m, n3 = 3 * n;
+    uint8_t *fixed = calloc((size_t)n3, 1);
+    for (int i = 0; i < 3 * m * m; i++)
+        fixed[i] = 1;
+    double *b = malloc((size_t)n3 * sizeof(double)), *x = calloc((size_t)n3, sizeof(double));
+    for (int i = 0; i < n3; i++)
+        b[i] = cos(0.21 * i);
+    NsBlockMatrix A[4];
+    for (int k = 0; k < 4; k++)
+        grid_matrix_drift(&A[k], m, 1e3, 1.0 + 20.0 * k, 0.3 * k);
+    NsSolver *s = ns_solver_create(NS_SOLVER_STALE_PCG);
+    ns_solver_set_threads(s, 2);
+    ns_solver_set_refresh_iterations(s, 3);
+    NsSolveStats st;
+    for (int round = 0; round < 4; round++) {
+        int last = 1; /* the matrix factored by the synchronous path */
+        /* A fresh factor of A[0], then a slow solve of A[2] schedules a refresh. */
+        ns_solver_refresh(s);
+        ENSURE(ns_solver_solve(s, &A[0], fixed, b, x, SEQ_TOL, 500, &st) == 0);
+        ENSURE(st.factorized && st.converged && st.factor_age == 0);
+        ENSURE(ns_solver_solve(s, &A[2], fixed, b, x, SEQ_TOL, 500, &st) == 0);
+        ENSURE(st.refresh_started && st.converged && !st.factorized && st.factor_age == 1);
+        if (round == 0) {
+            /* Too few iterations for the stale factor: factored now, and the solve finished. */
+            ENSURE(ns_solver_solve(s, &A[3], fixed, b, x, SEQ_TOL, 2, &st) == 0);
+            ENSURE(st.factorized && !st.analyzed && st.converged && st.factor_age == 0);
+            ENSURE(residual(&A[3], fixed, b, x) < 10 * SEQ_TOL);
+            last = 3;
+        } else if (round == 1) {
+            /* One more fixed DOF: a new pattern, analyzed and factored now. */
+            fixed[3 * n - 1] = 1;
+            ENSURE(ns_solver_solve(s, &A[1], fixed, b, x, SEQ_TOL, 500, &st) == 0);
+            ENSURE(st.factorized && st.analyzed && st.converged && st.factor_age == 0);
+        } else if (round == 2) {
+            ns_solver_refresh(s);
+            ENSURE(ns_solver_solve(s, &A[1], fixed, b, x, SEQ_TOL, 500, &st) == 0);
+            ENSURE(st.factorized && !st.analyzed && st.converged && st.factor_age == 0);
+        } else {
+            break; /* destroyed with the refactorization (probably) still running */
+        }
+        /* The dropped refresh is never adopted. */
+        for (int k = 0; k < 3; k++) {
+            ENSURE(ns_solver_solve(s, &A[last], fixed, b, x, SEQ_TOL, 500, &st) == 0);
+            ENSURE(!st.refresh_adopted && !st.factorized && st.converged);
+            ENSURE(st.factor_age == k + 1);
+        }
+    }
+    ns_solver_destroy(s);
+    for (int k = 0; k < 4; k++)
+        ns_bsm_free(&A[k]);
+    free(fixed);
+    free(b);
+    free(x);
+    return 0;
+}
+
 NS_TEST_MAIN({"all_kinds_agree", all_kinds_agree},
-             {"stale_factor_preconditions_and_refreshes", stale_factor_preconditions_and_refreshes})
+             {"stale_factor_preconditions_and_refreshes", stale_factor_preconditions_and_refreshes},
+             {"threads_give_identical_iterates", threads_give_identical_iterates},
+             {"background_refresh_adopted_on_schedule", background_refresh_adopted_on_schedule},
+             {"fallbacks_drop_pending_refresh", fallbacks_drop_pending_refresh})

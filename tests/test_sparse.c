@@ -91,4 +91,43 @@ static int insert_delete_against_dense(void)
     return 0;
 }
 
-NS_TEST_MAIN({"insert_delete_against_dense", insert_delete_against_dense})
+/* The threaded product is bit-identical to the serial one for every thread count, on a matrix
+ * large enough for the parallel path (rows of random lengths, so the threads' shares differ). */
+static int threaded_product_is_identical(void)
+{
+    const int n = 4 * NS_BSM_PARALLEL_MIN_ROWS + 3;
+    uint64_t st = 5;
+    NsBlockMatrix m;
+    ns_bsm_init(&m);
+    ENSURE(ns_bsm_resize(&m, n) == 0);
+    for (int i = 0; i < n; i++) {
+        int count = 1 + (int)((rnd(&st) + 1) * 20);
+        for (int e = 0; e < count; e++) {
+            int j = (int)((rnd(&st) + 1) * 0.5 * n) % n;
+            double b[9];
+            for (int k = 0; k < 9; k++)
+                b[k] = rnd(&st) * pow(10.0, 8 * rnd(&st)); /* wide range: order matters */
+            ENSURE(ns_bsm_add(&m, i, j, b) == 0);
+        }
+    }
+    double *x = malloc((size_t)3 * n * sizeof(double)),
+           *y1 = malloc((size_t)3 * n * sizeof(double));
+    double *y = malloc((size_t)3 * n * sizeof(double));
+    for (int k = 0; k < 3 * n; k++)
+        x[k] = rnd(&st) * pow(10.0, 8 * rnd(&st));
+    ns_bsm_mul(&m, x, y1);
+    for (int threads = 1; threads <= 4; threads++) {
+        for (int k = 0; k < 3 * n; k++)
+            y[k] = NAN; /* every entry must be written */
+        ns_bsm_mul_threads(&m, x, y, threads);
+        ENSURE(memcmp(y, y1, (size_t)3 * n * sizeof(double)) == 0);
+    }
+    free(x);
+    free(y1);
+    free(y);
+    ns_bsm_free(&m);
+    return 0;
+}
+
+NS_TEST_MAIN({"insert_delete_against_dense", insert_delete_against_dense},
+             {"threaded_product_is_identical", threaded_product_is_identical})
