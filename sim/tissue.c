@@ -3,12 +3,18 @@
 #include "tissue.h"
 
 #include "err.h"
+#include "ns_config.h"
 
 #include <math.h>
+#include <metis.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+
+#if NS_HAVE_OPENMP
+#include <omp.h>
+#endif
 
 NsTissueParams ns_default_tissue_params(void)
 {
@@ -16,9 +22,10 @@ NsTissueParams ns_default_tissue_params(void)
     p.gravity[0] = p.gravity[1] = p.gravity[2] = 0.0;
     p.beta = 0.25;
     p.gamma = 0.5;
-    p.lazy_threshold = 1e-3;
+    p.lazy_threshold = 1e-2; /* fem-lazy: ~8% rebuilt, 0.1% error */
     p.solve_tol = 1e-8;
     p.solve_max_iter = 2000;
+    p.threads = 1;
     return p;
 }
 
@@ -37,6 +44,14 @@ void ns_tissue_free(NsTissue *t)
     free(t->frame);
     free(t->jframe);
     free(t->jvalid);
+    free(t->jnew);
+    free(t->tet_force);
+    free(t->tet_jac);
+    free(t->part_node_start);
+    free(t->part_nodes);
+    free(t->part_tet_start);
+    free(t->part_tets);
+    free(t->colpos);
     free(t->mass);
     free(t->force);
     free(t->dof_fixed);
@@ -63,6 +78,9 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     t->frame = calloc((size_t)(nt > 0 ? nt : 1), sizeof *t->frame);
     t->jframe = calloc((size_t)(nt > 0 ? nt : 1), sizeof *t->jframe);
     t->jvalid = calloc((size_t)(nt > 0 ? nt : 1), 1);
+    t->jnew = calloc((size_t)(nt > 0 ? nt : 1), 1);
+    t->tet_force = calloc((size_t)(nt > 0 ? nt : 1) * 12, sizeof(double));
+    t->tet_jac = calloc((size_t)(nt > 0 ? nt : 1) * 288, sizeof(double));
     t->mass = calloc((size_t)(nn > 0 ? nn : 1), sizeof(double));
     t->force = calloc((size_t)(3 * nn > 0 ? 3 * nn : 1), sizeof(double));
     t->dof_fixed = calloc((size_t)(3 * nn > 0 ? 3 * nn : 1), 1);
@@ -70,9 +88,9 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     ns_bsm_init(&t->K);
     ns_bsm_init(&t->D);
     ns_bsm_init(&t->A);
-    if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jvalid || !t->mass ||
-        !t->force || !t->dof_fixed || !t->work || ns_bsm_resize(&t->K, nn) ||
-        ns_bsm_resize(&t->D, nn) || ns_bsm_resize(&t->A, nn)) {
+    if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jvalid || !t->jnew ||
+        !t->tet_force || !t->tet_jac || !t->mass || !t->force || !t->dof_fixed || !t->work ||
+        ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) || ns_bsm_resize(&t->A, nn)) {
         ns_set_err(err, err_sz, "out of memory");
         ns_tissue_free(t);
         return -1;
@@ -125,19 +143,6 @@ void ns_tissue_fix_dof(NsTissue *t, int node, int axis, int fixed)
         t->dof_fixed[3 * node + axis] = (uint8_t)(fixed != 0);
 }
 
-/* Scatter a 12x12 element matrix (scaled by sign) into the block matrix at the tet's nodes. */
-static void scatter(NsBlockMatrix *M, const int *tn, const double J[144], double sign)
-{
-    for (int a = 0; a < 4; a++)
-        for (int b = 0; b < 4; b++) {
-            double blk[9];
-            for (int i = 0; i < 3; i++)
-                for (int j = 0; j < 3; j++)
-                    blk[3 * i + j] = sign * J[12 * (3 * a + i) + 3 * b + j];
-            ns_bsm_add(M, tn[a], tn[b], blk);
-        }
-}
-
 static void frame_product(const NsTetFrame *f, int with_s, double out[9])
 {
     for (int i = 0; i < 3; i++)
@@ -172,67 +177,392 @@ static int needs_projection(const NsTetFrame *f)
     return f->s[2] < NS_TISSUE_PROJECT_BELOW;
 }
 
+/* ---- Parallel, deterministic assembly (§3.6.3) --------------------------------------------
+ *
+ * The paper scatters each tet's forces and Jacobian blocks straight into shared storage from
+ * several threads, with METIS keeping the threads' entries mostly apart. Floating-point sums
+ * taken in a thread-dependent order would make the state depend on the thread count, so we
+ * split the work in two phases with no shared accumulation at all:
+ *   1. per tet: forces into tet_force, and for a stale tet its element K and D into tet_K and
+ *      tet_D (kept between steps: the lazy update never has to rebuild an old contribution to
+ *      take it out again);
+ *   2. per node: its force is the sum of its incident tets' force rows, and a block row of K
+ *      and D touched by a rebuilt tet is zeroed and summed again from the incident tets.
+ * Every sum in phase 2 runs over the mesh's node->tet list in list order, so the result does not
+ * depend on which thread did what. Rebuilding a row from scratch also avoids the round-off drift
+ * of subtracting an old contribution and adding a new one. Block row i of K and D is written
+ * only by the thread that owns node i (ns_bsm_get(m, i, j) grows row i alone). */
+
+/* The part owning most of the tet's nodes (ties: the one met first in the tet's node order). */
+static int tet_part(const int *part, const int *tn)
+{
+    int best = part[tn[0]], best_n = 0;
+    for (int a = 0; a < 4; a++) {
+        int n = 0;
+        for (int b = 0; b < 4; b++)
+            n += part[tn[b]] == part[tn[a]];
+        if (n > best_n) {
+            best = part[tn[a]];
+            best_n = n;
+        }
+    }
+    return best;
+}
+
+/* Work partition: METIS splits the node graph into one part per thread, so that a thread's tets
+ * and block rows sit together and few tets straddle parts (§3.6.3). A tet goes to the part that
+ * owns most of its nodes. The partition only decides who does what, for speed and locality; it
+ * never changes a result. Returns 0, or -1 when out of memory (the caller then runs serially). */
+static int partition(NsTissue *t, int parts)
+{
+    const NsMesh *M = &t->mesh;
+    int nn = M->node_slots, nt = M->tet_slots;
+    if (t->part_node_start && t->part_count == parts && t->part_version == M->topology_version &&
+        t->part_node_slots == nn && t->part_tet_slots == nt)
+        return 0;
+    t->part_count = 0;
+    int *ns = realloc(t->part_node_start, (size_t)(parts + 1) * sizeof(int));
+    if (ns)
+        t->part_node_start = ns;
+    int *ts = realloc(t->part_tet_start, (size_t)(parts + 1) * sizeof(int));
+    if (ts)
+        t->part_tet_start = ts;
+    int *pn = realloc(t->part_nodes, (size_t)(nn > 0 ? nn : 1) * sizeof(int));
+    if (pn)
+        t->part_nodes = pn;
+    int *pt = realloc(t->part_tets, (size_t)(nt > 0 ? nt : 1) * sizeof(int));
+    if (pt)
+        t->part_tets = pt;
+    size_t ncol = (size_t)(t->K.n > nn ? t->K.n : nn);
+    int *cp = realloc(t->colpos, (size_t)parts * (ncol > 0 ? ncol : 1) * sizeof(int));
+    if (cp)
+        t->colpos = cp;
+    int *part = malloc((size_t)(nn > 0 ? nn : 1) * sizeof(int));
+    if (!ns || !ts || !pn || !pt || !cp || !part) {
+        free(part);
+        return -1;
+    }
+    for (size_t k = 0; k < (size_t)parts * ncol; k++)
+        cp[k] = -1;
+    /* Contiguous ranges of node indices: the answer for one part, and the fallback. */
+    for (int i = 0; i < nn; i++)
+        part[i] = (int)((int64_t)i * parts / nn);
+
+    if (parts > 1) {
+        /* The graph of alive nodes (compacted) joined by tet edges; vertex weight = incident
+         * tets, which is what phase 1 costs per node once tets go to their nodes' part. */
+        idx_t nv = 0, ncon = 1, np = parts, cut = 0;
+        size_t adj_max = 0;
+        for (int i = 0; i < nn; i++)
+            if (M->flags[i] & NS_NODE_ALIVE) {
+                nv++;
+                adj_max += 3 * (size_t)M->node_tets[i].count;
+            }
+        idx_t *vid = malloc((size_t)(nn > 0 ? nn : 1) * sizeof *vid);
+        idx_t *xadj = malloc((size_t)(nv + 1) * sizeof *xadj);
+        idx_t *adj = malloc((adj_max > 0 ? adj_max : 1) * sizeof *adj);
+        idx_t *vwgt = malloc((size_t)(nv > 0 ? nv : 1) * sizeof *vwgt);
+        idx_t *vpart = malloc((size_t)(nv > 0 ? nv : 1) * sizeof *vpart);
+        int *seen = malloc((size_t)(nn > 0 ? nn : 1) * sizeof *seen);
+        if (vid && xadj && adj && vwgt && vpart && seen && nv > parts) {
+            idx_t v = 0;
+            for (int i = 0; i < nn; i++) {
+                vid[i] = (M->flags[i] & NS_NODE_ALIVE) ? v++ : -1;
+                seen[i] = -1;
+            }
+            idx_t k = 0;
+            v = 0;
+            for (int i = 0; i < nn; i++) {
+                if (vid[i] < 0)
+                    continue;
+                const NsIntList *l = &M->node_tets[i];
+                xadj[v] = k;
+                vwgt[v] = l->count > 0 ? l->count : 1;
+                for (int q = 0; q < l->count; q++) {
+                    const int *tn = M->tet_node + 4 * l->items[q];
+                    for (int b = 0; b < 4; b++)
+                        if (tn[b] != i && seen[tn[b]] != i && vid[tn[b]] >= 0) {
+                            seen[tn[b]] = i;
+                            adj[k++] = vid[tn[b]];
+                        }
+                }
+                v++;
+            }
+            xadj[nv] = k;
+            idx_t opt[METIS_NOPTIONS];
+            METIS_SetDefaultOptions(opt);
+            opt[METIS_OPTION_SEED] = 1; /* the same partition every run, for stable timings */
+            if (METIS_PartGraphKway(&nv, &ncon, xadj, adj, vwgt, NULL, NULL, &np, NULL, NULL, opt,
+                                    &cut, vpart) == METIS_OK)
+                for (int i = 0; i < nn; i++)
+                    if (vid[i] >= 0 && vpart[vid[i]] >= 0 && vpart[vid[i]] < parts)
+                        part[i] = (int)vpart[vid[i]];
+        }
+        free(vid);
+        free(xadj);
+        free(adj);
+        free(vwgt);
+        free(vpart);
+        free(seen);
+    }
+
+    /* Nodes and tets grouped by part (counting sort, ascending index within a part). */
+    memset(ns, 0, (size_t)(parts + 1) * sizeof(int));
+    memset(ts, 0, (size_t)(parts + 1) * sizeof(int));
+    for (int i = 0; i < nn; i++)
+        ns[part[i] + 1]++;
+    for (int e = 0; e < nt; e++) {
+        if (!ns_mesh_tet_alive(M, e))
+            continue;
+        ts[tet_part(part, M->tet_node + 4 * e) + 1]++;
+    }
+    for (int p = 0; p < parts; p++) {
+        ns[p + 1] += ns[p];
+        ts[p + 1] += ts[p];
+    }
+    for (int i = 0; i < nn; i++)
+        pn[ns[part[i]]++] = i;
+    for (int e = 0; e < nt; e++)
+        if (ns_mesh_tet_alive(M, e))
+            pt[ts[tet_part(part, M->tet_node + 4 * e)]++] = e;
+    for (int p = parts; p > 0; p--) {
+        ns[p] = ns[p - 1];
+        ts[p] = ts[p - 1];
+    }
+    ns[0] = ts[0] = 0;
+    free(part);
+    t->part_count = parts;
+    t->part_version = M->topology_version;
+    t->part_node_slots = nn;
+    t->part_tet_slots = nt;
+    return 0;
+}
+
+typedef struct AssemblyCounts {
+    int alive, updated, inverted, nan;
+    double jacobian_ms; /* time spent on Jacobians by one thread */
+} AssemblyCounts;
+
+/* Phase 1 for tet e: writes only tet e's own slots. */
+static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
+{
+    const NsMesh *M = &t->mesh;
+    const int *tn = M->tet_node + 4 * e;
+    const double *x[4], *v[4];
+    for (int k = 0; k < 4; k++) {
+        x[k] = M->x + 3 * tn[k];
+        v[k] = M->v + 3 * tn[k];
+    }
+    const NsTissueMaterial *mat = &t->materials[M->tet_region[e]];
+    double *f = t->tet_force + 12 * (size_t)e;
+    ns_fem_tet_forces(&t->rest[e], &mat->fem, x, v, f, &t->frame[e]);
+    for (int k = 0; k < 12; k++)
+        if (!isfinite(f[k])) {
+            c->nan++;
+            f[k] = 0.0;
+        }
+    c->alive++;
+    c->inverted += t->frame[e].s[2] <= 0.0;
+    int neo = mat->fem.model == NS_MODEL_NEOHOOKEAN;
+    t->jnew[e] = 0;
+    if (!t->jvalid[e] ||
+        jacobian_change(&t->frame[e], &t->jframe[e], neo) > t->params.lazy_threshold) {
+        double tj0 = now_ms();
+        double *J = t->tet_jac + 288 * (size_t)e;
+        ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e], needs_projection(&t->frame[e]),
+                             J, J + 144);
+        t->jframe[e] = t->frame[e];
+        t->jvalid[e] = 1;
+        t->jnew[e] = 1;
+        c->updated++;
+        c->jacobian_ms += now_ms() - tj0;
+    }
+}
+
+/* Local index (0-3) of node i in tet tn. */
+static int local_index(const int *tn, int i)
+{
+    return tn[0] == i ? 0 : tn[1] == i ? 1 : tn[2] == i ? 2 : 3;
+}
+
+/* Phase 2, force of node i: its incident tets' rows in node->tet list order, then gravity. */
+static void node_force(NsTissue *t, int i)
+{
+    const NsMesh *M = &t->mesh;
+    double f[3] = {0.0, 0.0, 0.0};
+    if (M->flags[i] & NS_NODE_ALIVE) {
+        const NsIntList *l = &M->node_tets[i];
+        for (int q = 0; q < l->count; q++) {
+            int e = l->items[q];
+            const double *fe =
+                t->tet_force + 12 * (size_t)e + 3 * local_index(M->tet_node + 4 * e, i);
+            for (int c = 0; c < 3; c++)
+                f[c] += fe[c];
+        }
+    }
+    for (int c = 0; c < 3; c++)
+        t->force[3 * i + c] = f[c] + t->mass[i] * t->params.gravity[c];
+}
+
+/* Prefetch the part of tet e's element Jacobians that row i will read (rows 3a..3a+2 of K and
+ * D): the tets around a node lie anywhere in memory, and the gather is bound by fetching them. */
+static void prefetch_strip(const NsTissue *t, int e, int i)
+{
+#if defined(__GNUC__)
+    const char *p = (const char *)(t->tet_jac + 288 * (size_t)e +
+                                   36 * local_index(t->mesh.tet_node + 4 * e, i));
+    for (int z = 0; z < 36 * (int)sizeof(double); z += 64) {
+        __builtin_prefetch(p + z);
+        __builtin_prefetch(p + 144 * sizeof(double) + z);
+    }
+#else
+    (void)t, (void)e, (void)i;
+#endif
+}
+
+/* kb += the 3x3 block at Ke (row stride 12), db likewise from De. */
+static void add_block(double *restrict kb, double *restrict db, const double *restrict Ke,
+                      const double *restrict De)
+{
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++) {
+            kb[3 * r + c] += Ke[12 * r + c];
+            db[3 * r + c] += De[12 * r + c];
+        }
+}
+
+/* Phase 2, block row i of K and D, gathered again if an incident tet was rebuilt (or all_rows):
+ * zeroed, then every incident tet's blocks (i, j) added in node->tet list order. colpos (node
+ * slots, all -1, may be NULL) maps a column to its position in the row while the row is
+ * gathered, which saves a search per block when K and D already store every block the tets
+ * need (always, after the first gather); otherwise blocks are found, or inserted, one by one.
+ * Returns -1 if a block could not be stored (memory), else 0. */
+static int node_rows(NsTissue *t, int i, int all_rows, int *colpos)
+{
+    const NsMesh *M = &t->mesh;
+    const NsIntList *l = (M->flags[i] & NS_NODE_ALIVE) ? &M->node_tets[i] : NULL;
+    int n = l ? l->count : 0, dirty = all_rows;
+    for (int q = 0; q < n && !dirty; q++)
+        dirty = t->jnew[l->items[q]];
+    if (!dirty)
+        return 0;
+    NsBlockRow *kr = &t->K.rows[i], *dr = &t->D.rows[i];
+    if (kr->count)
+        memset(kr->val, 0, (size_t)kr->count * 9 * sizeof(double));
+    if (dr->count)
+        memset(dr->val, 0, (size_t)dr->count * 9 * sizeof(double));
+    int fast = colpos && kr->count == dr->count &&
+               (kr->count == 0 || memcmp(kr->col, dr->col, (size_t)kr->count * sizeof(int)) == 0);
+    if (fast) {
+        for (int p = 0; p < kr->count; p++)
+            colpos[kr->col[p]] = p;
+        for (int q = 0; q < n && fast; q++) {
+            const int *tn = M->tet_node + 4 * l->items[q];
+            fast = colpos[tn[0]] >= 0 && colpos[tn[1]] >= 0 && colpos[tn[2]] >= 0 &&
+                   colpos[tn[3]] >= 0;
+        }
+    }
+    int rc = 0;
+    for (int q = 0; q < n; q++) {
+        int e = l->items[q];
+        const int *tn = M->tet_node + 4 * e;
+        int a = local_index(tn, i);
+        if (q + 1 < n)
+            prefetch_strip(t, l->items[q + 1], i);
+        const double *Ke = t->tet_jac + 288 * (size_t)e + 36 * a, *De = Ke + 144;
+        if (fast) {
+            for (int b = 0; b < 4; b++)
+                add_block(kr->val + 9 * colpos[tn[b]], dr->val + 9 * colpos[tn[b]], Ke + 3 * b,
+                          De + 3 * b);
+            continue;
+        }
+        for (int b = 0; b < 4; b++) {
+            double *kb = ns_bsm_get(&t->K, i, tn[b]), *db = ns_bsm_get(&t->D, i, tn[b]);
+            if (kb && db)
+                add_block(kb, db, Ke + 3 * b, De + 3 * b);
+            else
+                rc = -1;
+        }
+    }
+    if (colpos)
+        for (int p = 0; p < kr->count; p++)
+            colpos[kr->col[p]] = -1;
+    return rc;
+}
+
 void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
 {
     double t0 = now_ms();
     NsMesh *M = &t->mesh;
-    int nn = M->node_slots;
-    memset(t->force, 0, (size_t)3 * nn * sizeof(double));
-    int updated = 0, alive = 0, inverted = 0, nan = 0;
-    if (force_all) {
-        ns_bsm_zero(&t->K);
-        ns_bsm_zero(&t->D);
+    int threads = t->params.threads > 1 ? t->params.threads : 1;
+    if (force_all)
         memset(t->jvalid, 0, (size_t)M->tet_slots);
-    }
+    /* Rows of deleted tets' nodes must lose their blocks: after a topology change every row is
+     * gathered again (the element matrices of surviving tets are kept). */
+    int all_rows = force_all || !t->kd_valid || t->kd_version != M->topology_version;
+    int nn = M->node_slots < t->K.n ? M->node_slots : t->K.n;
+    int parts = partition(t, threads) == 0 ? t->part_count : 0;
+    size_t ncol = (size_t)(t->K.n > M->node_slots ? t->K.n : M->node_slots);
+    int alive = 0, updated = 0, inverted = 0, nan = 0, failed = 0;
     double tj = 0.0;
-    for (int e = 0; e < M->tet_slots; e++) {
-        if (!ns_mesh_tet_alive(M, e))
-            continue;
-        alive++;
-        const int *tn = M->tet_node + 4 * e;
-        const double *x[4], *v[4];
-        for (int k = 0; k < 4; k++) {
-            x[k] = M->x + 3 * tn[k];
-            v[k] = M->v + 3 * tn[k];
-        }
-        const NsTissueMaterial *mat = &t->materials[M->tet_region[e]];
-        double f[12];
-        ns_fem_tet_forces(&t->rest[e], &mat->fem, x, v, f, &t->frame[e]);
-        for (int k = 0; k < 12; k++) {
-            if (!isfinite(f[k])) {
-                nan++;
-                f[k] = 0.0;
-            }
-            t->force[3 * tn[k / 3] + k % 3] += f[k];
-        }
-        inverted += t->frame[e].s[2] <= 0.0;
-        int neo = mat->fem.model == NS_MODEL_NEOHOOKEAN;
-        if (!t->jvalid[e] ||
-            jacobian_change(&t->frame[e], &t->jframe[e], neo) > t->params.lazy_threshold) {
-            double tj0 = now_ms();
-            double K[144], D[144];
-            if (t->jvalid[e]) { /* take the old contribution out */
-                ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->jframe[e],
-                                     needs_projection(&t->jframe[e]), K, D);
-                scatter(&t->K, tn, K, -1.0);
-                scatter(&t->D, tn, D, -1.0);
-            }
-            ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e],
-                                 needs_projection(&t->frame[e]), K, D);
-            scatter(&t->K, tn, K, 1.0);
-            scatter(&t->D, tn, D, 1.0);
-            t->jframe[e] = t->frame[e];
-            t->jvalid[e] = 1;
-            updated++;
-            tj += now_ms() - tj0;
+    if (parts == 0) { /* no memory for the partition: the same work, serially by index */
+        AssemblyCounts c = {0};
+        for (int e = 0; e < M->tet_slots; e++)
+            if (ns_mesh_tet_alive(M, e))
+                tet_phase(t, e, &c);
+        double tr = now_ms();
+        for (int i = 0; i < M->node_slots; i++)
+            node_force(t, i);
+        for (int i = 0; i < nn; i++)
+            failed |= node_rows(t, i, all_rows, NULL) != 0;
+        alive = c.alive;
+        updated = c.updated;
+        inverted = c.inverted;
+        nan = c.nan;
+        tj = c.jacobian_ms + now_ms() - tr;
+    } else {
+#if NS_HAVE_OPENMP
+#pragma omp parallel num_threads(threads) reduction(+ : alive, updated, inverted, nan)           \
+    reduction(| : failed) reduction(max : tj)
+#endif
+        {
+            int tid = 0, nth = 1;
+#if NS_HAVE_OPENMP
+            tid = omp_get_thread_num();
+            nth = omp_get_num_threads();
+#endif
+            /* OpenMP may give fewer threads than parts: each thread takes every nth part. */
+            AssemblyCounts c = {0};
+            for (int p = tid; p < parts; p += nth)
+                for (int k = t->part_tet_start[p]; k < t->part_tet_start[p + 1]; k++)
+                    tet_phase(t, t->part_tets[k], &c);
+#if NS_HAVE_OPENMP
+#pragma omp barrier
+#endif
+            for (int p = tid; p < parts; p += nth)
+                for (int k = t->part_node_start[p]; k < t->part_node_start[p + 1]; k++)
+                    node_force(t, t->part_nodes[k]);
+            double tr = now_ms();
+            int *colpos = t->colpos + (size_t)tid * ncol;
+            for (int p = tid; p < parts; p += nth)
+                for (int k = t->part_node_start[p]; k < t->part_node_start[p + 1]; k++)
+                    if (t->part_nodes[k] < nn)
+                        failed |= node_rows(t, t->part_nodes[k], all_rows, colpos) != 0;
+            alive += c.alive;
+            updated += c.updated;
+            inverted += c.inverted;
+            nan += c.nan;
+            double mine = c.jacobian_ms + now_ms() - tr;
+            tj = mine > tj ? mine : tj;
         }
     }
-    for (int i = 0; i < nn; i++)
-        for (int c = 0; c < 3; c++)
-            t->force[3 * i + c] += t->mass[i] * t->params.gravity[c];
+    /* A row that lost a block to memory is wrong: gather every row again next time. */
+    t->kd_valid = !failed;
+    t->kd_version = M->topology_version;
     if (stats) {
+        double total = now_ms() - t0;
         stats->jacobian_ms += tj;
-        stats->force_ms += now_ms() - t0 - tj;
+        stats->force_ms += total > tj ? total - tj : 0.0;
         stats->jacobian_fraction = alive ? (double)updated / alive : 0.0;
         stats->inverted = inverted;
         stats->nan_count += nan;
@@ -293,6 +623,7 @@ int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
     st.solve_ms = now_ms() - ts;
     st.cg_iterations = ss.iterations;
     st.factorized = ss.factorized;
+    st.refresh_started = ss.refresh_started;
     st.unconverged = rc == 0 && !ss.converged;
     int finite = rc == 0;
     for (int i = 0; i < n3 && finite; i++)
@@ -389,4 +720,29 @@ double ns_tissue_energy(const NsTissue *t)
         e += ns_fem_tet_energy(&t->rest[k], &t->materials[M->tet_region[k]].fem, x);
     }
     return e;
+}
+
+uint64_t ns_tissue_state_hash(const NsTissue *t)
+{
+    const NsMesh *M = &t->mesh;
+    uint64_t h = 0xcbf29ce484222325ull; /* FNV-1a 64 */
+    uint64_t topo = ns_mesh_topology_hash(M);
+    for (int b = 0; b < 8; b++) {
+        h ^= (topo >> (8 * b)) & 0xff;
+        h *= 0x100000001b3ull;
+    }
+    for (int i = 0; i < M->node_slots; i++) {
+        if (!(M->flags[i] & NS_NODE_ALIVE))
+            continue;
+        const double *arrays[3] = {M->x, M->v, M->a};
+        for (int k = 0; k < 9; k++) {
+            uint64_t bits;
+            memcpy(&bits, arrays[k / 3] + 3 * i + k % 3, sizeof bits);
+            for (int b = 0; b < 8; b++) {
+                h ^= (bits >> (8 * b)) & 0xff;
+                h *= 0x100000001b3ull;
+            }
+        }
+    }
+    return h;
 }

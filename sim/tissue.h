@@ -3,8 +3,9 @@
  * Eq. 1-5: beta = 1/4, gamma = 1/2, one Newton step on the accelerations).
  *
  * Model (read-only while stepping): materials, densities, gravity, Newmark parameters, lazy
- * threshold. State: the mesh (positions, velocities, accelerations), the per-tet frames the
- * Jacobians were last built from, the assembled K = dF/dx and D = dF/dv. */
+ * threshold, thread count. State: the mesh (positions, velocities, accelerations), the per-tet
+ * frames the Jacobians were last built from and those element Jacobians, the assembled
+ * K = dF/dx and D = dF/dv. */
 #ifndef NS_TISSUE_H
 #define NS_TISSUE_H
 
@@ -26,21 +27,30 @@ typedef struct NsTissueMaterial {
 typedef struct NsTissueParams {
     double gravity[3];  /* [m/s^2] */
     double beta, gamma; /* Newmark; 1/4, 1/2 = trapezoidal rule (energy conserving) */
-    /* Lazy Jacobian threshold (§3.6.3): a tet's Jacobian is rebuilt when the largest change of
-     * an entry of U or V, or the largest relative change of a singular value, since its last
-     * rebuild exceeds this (dimensionless; 0 = rebuild every tet every step). Our measure is
-     * scale-free, unlike the paper's Eq. 12, so its value is ours; see docs/validation.md. */
+    /* Lazy Jacobian threshold (§3.6.3, Eq. 12): a tet's Jacobian is rebuilt when the largest
+     * entry of R = U V^T (corotational) or F = U S V^T (neo-Hookean) has changed by more than
+     * this since its last rebuild (dimensionless; for R about the rotation angle in radians;
+     * 0 = rebuild every tet every step). Our measure is scale-free, unlike the paper's, so its
+     * value is ours: default 1e-2, chosen by validation case fem-lazy (docs/validation.md). */
     double lazy_threshold;
     double solve_tol;   /* relative residual of each linear solve */
     int solve_max_iter; /* CG iteration cap */
+    /* Threads for the force and Jacobian assembly (§3.6.3); values < 1 mean 1. The result is
+     * bit-identical for every thread count (see ns_tissue_forces). */
+    int threads;
 } NsTissueParams;
 
 NsTissueParams ns_default_tissue_params(void);
 
 typedef struct NsTissueStats {
+    /* Wall times [ms]. ns_tissue_forces adds to force_ms and jacobian_ms: jacobian_ms is the
+     * busiest thread's time spent building stale tets' element Jacobians plus gathering the
+     * dirty block rows of K and D (with one thread: exactly the Jacobian work), force_ms the
+     * rest of the call's wall time (element forces, the force gather, partitioning). */
     double force_ms, jacobian_ms, solve_ms, total_ms;
     int cg_iterations;
-    int factorized;
+    int factorized;           /* the solver factored this step's matrix and used it */
+    int refresh_started;      /* the solver scheduled a background refactorization (solver.h) */
     double jacobian_fraction; /* fraction of tets whose Jacobian was rebuilt this step */
     int nan_count;            /* non-finite values caught (the step is rejected) */
     int inverted;             /* tets with det F <= 0 after the step */
@@ -55,13 +65,30 @@ typedef struct NsTissue {
     NsTetRest *rest;             /* (tet_slots) */
     NsTetFrame *frame;           /* (tet_slots) frame of the last force evaluation */
     NsTetFrame *jframe; /* (tet_slots) frame the tet's Jacobian contribution was built from */
-    uint8_t *jvalid;    /* (tet_slots) 1 if its contribution is in K and D */
+    uint8_t *jvalid;    /* (tet_slots) 1 if tet_jac holds its Jacobians at jframe */
+    uint8_t *jnew;      /* (tet_slots) 1 if its Jacobians were rebuilt by the last call */
+    double *tet_force;  /* (tet_slots x 12) element forces of the last evaluation [N] */
+    /* (tet_slots x 288) the tet's element Jacobians at jframe, 12 x 12 row-major: dF/dx [N/m]
+     * in the first 144 entries, dF/dv [N s/m] in the next 144 */
+    double *tet_jac;
     double *mass;       /* (node_slots) lumped [kg] */
     double *force;      /* (3 node_slots) total force at the current state [N] */
     uint8_t *dof_fixed; /* (3 node_slots) */
     NsBlockMatrix K, D, A;
     double *work; /* scratch, 4 x 3 node_slots */
     uint64_t steps;
+    uint64_t kd_version; /* topology version K and D were last gathered for */
+    int kd_valid;        /* 0: every block row of K and D must be gathered again */
+    /* Work partition (§3.6.3), a function of the topology and the thread count only: part p
+     * owns nodes part_nodes[part_node_start[p] .. part_node_start[p+1]) and tets likewise. */
+    int part_count;
+    uint64_t part_version;
+    int part_node_slots, part_tet_slots;
+    int *part_node_start; /* (part_count + 1) */
+    int *part_nodes;      /* (node_slots) */
+    int *part_tet_start;  /* (part_count + 1) */
+    int *part_tets;       /* (alive tets) */
+    int *colpos; /* (part_count x node_slots) per-thread scratch for the row gather, all -1 */
 } NsTissue;
 
 /* Takes a copy of mesh. materials[r] is used for tets of region r. Nodes flagged
@@ -75,7 +102,14 @@ void ns_tissue_free(NsTissue *t);
 void ns_tissue_fix_dof(NsTissue *t, int node, int axis, int fixed);
 
 /* Forces (elastic, damping, gravity) at the current state into t->force, and K, D updated
- * lazily (all tets if force_all). Counts NaNs and inverted tets into stats. */
+ * lazily (all tets if force_all). Counts NaNs and inverted tets into stats.
+ *
+ * Parallel in two phases with params.threads threads (OpenMP if built with it, else serial):
+ * (1) each tet writes its forces and, if stale, its element K and D into per-tet storage;
+ * (2) each node sums its incident tets' force rows, and each block row of K and D touched by a
+ * rebuilt tet is zeroed and gathered again from its incident tets' element matrices. A node's
+ * force and an entry's sum are taken in the order of the mesh's node->tet list, never in an
+ * order that depends on the threads, so the state is bit-identical for every thread count. */
 void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats);
 
 /* One Newmark step of size dt [s] (§3.1): assemble, solve (M - beta dt^2 K - gamma dt D) a' =
@@ -93,5 +127,11 @@ int ns_tissue_static_solve(NsTissue *t, NsSolver *solver, const double *ext, dou
 
 /* Kinetic + elastic energy [J] (for the energy-drift validation). */
 double ns_tissue_energy(const NsTissue *t);
+
+/* 64-bit FNV-1a hash of the state: the mesh's topology hash, then the bit patterns of x, v and
+ * a of every alive node in node order. Equal states hash equal; any bit of difference in a
+ * position, velocity or acceleration (including -0.0 vs 0.0) changes it, as does the topology.
+ * For determinism checks across runs and thread counts (STYLE.md 8). */
+uint64_t ns_tissue_state_hash(const NsTissue *t);
 
 #endif
