@@ -4,5 +4,6 @@
 #define NS_COMMANDS_H
 
 int ns_cmd_check(int argc, char **argv);
+int ns_cmd_validate(int argc, char **argv);
 
 #endif

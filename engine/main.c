@@ -20,7 +20,8 @@ static const char usage[] =
     "  needlesim check SCENARIO.lua [--json] [--mesh-out FILE.vtu|FILE.msh]\n"
     "      run the scenario, build its tissue mesh and print mesh and model statistics\n"
     "  needlesim run SCENARIO.lua [-o DIR] [...]          (not available in this version yet)\n"
-    "  needlesim validate [CASE...] [--json]              (not available in this version yet)\n"
+    "  needlesim validate [CASE...] [--json] [--list]\n"
+    "      run the built-in validation cases (docs/validation.md); exit 1 if any fails\n"
     "  needlesim bench SCENARIO.lua [...]                 (not available in this version yet)\n"
     "  needlesim --help | --version\n"
     "\n"
@@ -59,7 +60,9 @@ int main(int argc, char **argv)
     }
     if (strcmp(cmd, "check") == 0)
         return ns_cmd_check(argc - 1, argv + 1);
-    if (strcmp(cmd, "run") == 0 || strcmp(cmd, "validate") == 0 || strcmp(cmd, "bench") == 0) {
+    if (strcmp(cmd, "validate") == 0)
+        return ns_cmd_validate(argc - 1, argv + 1);
+    if (strcmp(cmd, "run") == 0 || strcmp(cmd, "bench") == 0) {
         fprintf(stderr, "needlesim: '%s' is not available in this version yet\n", cmd);
         return 2;
     }

@@ -180,7 +180,7 @@ static bool get_bool(lua_State *L, int idx, const char *key)
 
 /* ---- materials ----------------------------------------------------------------------------- */
 
-const char *ns_material_model_name(NsMaterialModel m)
+const char *ns_material_model_name(NsElasticModel m)
 {
     return m == NS_MODEL_NEOHOOKEAN ? "neohookean" : "corotational";
 }

@@ -16,26 +16,22 @@
 
 #include <stdbool.h>
 
+#include "fem.h"
 #include "lua_runtime.h"
 #include "mesh.h"
 #include "mesher.h"
 
-typedef enum NsMaterialModel {
-    NS_MODEL_COROTATIONAL, /* linear elasticity in a rotated frame (Irving 2004 style) */
-    NS_MODEL_NEOHOOKEAN,
-} NsMaterialModel;
-
 /* A tissue material (scripts/needlesim.lua: ns.material). SI units. */
 typedef struct NsMaterial {
     char *name;
-    double youngs;    /* Young's modulus E [Pa] */
-    double poisson;   /* Poisson's ratio nu [-], 0 <= nu < 0.5 */
-    double density;   /* [kg/m^3] */
-    double damping;   /* viscous damping coefficient [Pa s] */
-    double friction;  /* needle-tissue friction per unit length f_perlen [N/m] (paper §3.3) */
-    double cut_force; /* force to cut through this tissue at the tip f_cut [N] (§3.3) */
-    NsMaterialModel model;
-    bool has_membrane;         /* a capsule at the region's surface (§3.3 capsule puncture) */
+    double youngs;        /* Young's modulus E [Pa] */
+    double poisson;       /* Poisson's ratio nu [-], 0 <= nu < 0.5 */
+    double density;       /* [kg/m^3] */
+    double damping;       /* viscous damping coefficient [Pa s] */
+    double friction;      /* needle-tissue friction per unit length f_perlen [N/m] (paper §3.3) */
+    double cut_force;     /* force to cut through this tissue at the tip f_cut [N] (§3.3) */
+    NsElasticModel model; /* sim/fem.h */
+    bool has_membrane;    /* a capsule at the region's surface (§3.3 capsule puncture) */
     double membrane_thickness; /* [m] */
     double membrane_cut_force; /* [N] */
 } NsMaterial;
@@ -87,6 +83,14 @@ void ns_scenario_free(NsScenario *sc);
  * array (not the strings). */
 const char **ns_scenario_region_names(const NsScenario *sc);
 
-const char *ns_material_model_name(NsMaterialModel m);
+const char *ns_material_model_name(NsElasticModel m);
+
+/* The scenario's tissue as a simulation model: region r's material becomes material r
+ * (damping as the shear damping coefficient), fixed regions' nodes are held. params may be
+ * NULL (defaults). Returns 0, or -1 with a message. */
+struct NsTissue;
+struct NsTissueParams;
+int ns_scenario_tissue(const NsScenario *sc, const struct NsTissueParams *params,
+                       struct NsTissue *t, char *err, int err_sz);
 
 #endif

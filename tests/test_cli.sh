@@ -161,7 +161,6 @@ expect_error "no command: usage, exit 2" 2 "usage:" --
 expect_error "unknown command: exit 2" 2 "unknown command 'frobnicate'" -- frobnicate
 expect_error "run not built yet: exit 2" 2 "'run' is not available in this version yet" -- \
     run scenarios/phantom.lua
-expect_error "validate not built yet: exit 2" 2 "'validate' is not available" -- validate
 expect_error "bench not built yet: exit 2" 2 "'bench' is not available" -- bench x.lua
 expect_error "check: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
     check scenarios/phantom.lua --bogus

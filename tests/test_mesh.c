@@ -1,44 +1,25 @@
 /* Tests for sim/mesh.c: insertion and deletion keep every invariant (checked by walking the
  * whole mesh), free lists reuse indices, the topology hash ignores history, boundary checks. */
 #include "mesh.h"
+#include "mesh_grid.h"
 #include "quality.h"
 #include "ns_test.h"
 
 #include <stdint.h>
 #include <stdlib.h>
 
-/* An nx*ny*nz grid of unit cubes (edge h), each split into six tets around its main diagonal
- * (Kuhn's split, which is conforming across cubes). */
+/* An nx*ny*nz grid of cubes (edge h) from sim/mesh_grid.c, with regions in a checkerboard
+ * (tet 6 c + p belongs to cube c). */
 static void build_grid(NsMesh *m, int nx, int ny, int nz, double h)
 {
-    ns_mesh_init(m);
-    for (int k = 0; k <= nz; k++)
-        for (int j = 0; j <= ny; j++)
-            for (int i = 0; i <= nx; i++) {
-                double u[3] = {i * h, j * h, k * h};
-                ns_mesh_add_node(m, u);
-            }
-    static const int perm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2},
-                                   {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++)
-                for (int p = 0; p < 6; p++) {
-                    int c[3] = {i, j, k}, nodes[4];
-                    for (int s = 0; s < 4; s++) {
-                        if (s > 0)
-                            c[perm[p][s - 1]]++;
-                        nodes[s] = c[0] + (nx + 1) * (c[1] + (ny + 1) * c[2]);
-                    }
-                    const double *u = m->u;
-                    if (ns_tet_volume(u + 3 * nodes[0], u + 3 * nodes[1], u + 3 * nodes[2],
-                                      u + 3 * nodes[3]) < 0) {
-                        int t = nodes[2];
-                        nodes[2] = nodes[3];
-                        nodes[3] = t;
-                    }
-                    ns_mesh_add_tet(m, nodes, (i + j + k) % 2);
-                }
+    const double lo[3] = {0.0, 0.0, 0.0}, hi[3] = {nx * h, ny * h, nz * h};
+    char err[256];
+    if (ns_mesh_grid_box(m, lo, hi, nx, ny, nz, 0, err, sizeof err))
+        return;
+    for (int t = 0; t < m->tet_slots; t++) {
+        int c = t / 6, i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
+        m->tet_region[t] = (i + j + k) % 2;
+    }
 }
 
 static int grid_is_valid(void)
@@ -54,6 +35,15 @@ static int grid_is_valid(void)
     ENSURE(b.closed && b.manifold);
     ENSURE(b.faces == 2 * 2 * (3 * 2 + 2 * 2 + 3 * 2));
     ENSURE(ns_mesh_first_unreferenced_node(&m) < 0);
+    double volume = 0.0;
+    for (int t = 0; t < m.tet_slots; t++) {
+        const int *tn = m.tet_node + 4 * t;
+        double v =
+            ns_tet_volume(m.u + 3 * tn[0], m.u + 3 * tn[1], m.u + 3 * tn[2], m.u + 3 * tn[3]);
+        ENSURE(v > 0.0);
+        volume += v;
+    }
+    ENSURE_SMALL(volume - 3 * 2 * 2 * 1e-6, 1e-18);
     /* Interior nodes of a 3x2x2 grid: (2)(1)(1) = 2 are not on the boundary. */
     int interior = 0;
     for (int i = 0; i < m.node_slots; i++)

@@ -30,9 +30,10 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 # --- 2. Build ------------------------------------------------------------------------------------
-# One thread for OpenBLAS and for CHOLMOD's OpenMP loops unless the caller says otherwise: on a
-# 2-core machine they slowed the factorization (DESIGN.md); our own parallel loops take
-# --threads.
+# One thread for OpenBLAS unless the caller says otherwise: on a 2-core machine more slowed the
+# factorization (DESIGN.md). The program sets this itself too; CHOLMOD 3's own OpenMP loops
+# ignore OMP_NUM_THREADS (their count is fixed at compile time), so sim/solver.c switches them
+# off around each factorization. Our own parallel loops take an explicit thread count.
 export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
 

@@ -1,0 +1,93 @@
+#!/bin/bash
+# `needlesim validate`: every built-in validation case passes (docs/validation.md), the JSON has
+# the contract's keys, and bad arguments are usage errors (exit 2) before anything runs.
+#
+# usage: tests/test_validate.sh NEEDLESIM_BINARY
+# Prints one line per check; exits 0 only if every check passes.
+set -u
+
+BIN=${1:?usage: test_validate.sh NEEDLESIM_BINARY}
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-validate.XXXXXX") || exit 1
+trap 'rm -rf "$TMP"' EXIT
+PASSED=0
+FAILED=0
+
+pass() {
+    echo "ok    $1"
+    PASSED=$((PASSED + 1))
+}
+
+fail() {
+    echo "FAIL  $1: $2"
+    FAILED=$((FAILED + 1))
+}
+
+CASES="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy"
+
+# The whole suite, as JSON.
+"$BIN" validate --json >"$TMP/out.json" 2>"$TMP/err"
+rc=$?
+cat "$TMP/out.json"
+if [ $rc = 0 ]; then pass "validate --json exits 0"; else fail "validate --json exits 0" "exit $rc"; fi
+for c in $CASES; do
+    line=$(grep "\"name\": \"$c\"" "$TMP/out.json")
+    if [ -z "$line" ]; then
+        fail "$c" "missing from the output"
+    elif ! echo "$line" | grep -q '"pass": true'; then
+        fail "$c" "did not pass"
+    else
+        missing=""
+        for key in name metric value reference error tolerance pass; do
+            echo "$line" | grep -q "\"$key\": " || missing="$missing $key"
+        done
+        if [ -n "$missing" ]; then fail "$c" "keys missing:$missing"; else pass "$c passes"; fi
+    fi
+done
+if grep -q '^  "passed": 6,$' "$TMP/out.json" && grep -q '^  "failed": 0$' "$TMP/out.json"; then
+    pass "passed 6, failed 0"
+else
+    fail "passed/failed counts" "$(grep -E '"(passed|failed)"' "$TMP/out.json" | tr -d '\n')"
+fi
+if command -v python3 >/dev/null; then
+    if python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); assert len(d["cases"]) == 6' \
+        "$TMP/out.json" 2>"$TMP/py"; then
+        pass "JSON parses"
+    else
+        fail "JSON parses" "$(head -1 "$TMP/py")"
+    fi
+fi
+
+# One case, as a table.
+"$BIN" validate fem-compression >"$TMP/out.txt" 2>"$TMP/err"
+rc=$?
+if [ $rc = 0 ] && grep -q '^fem-compression .* pass$' "$TMP/out.txt" &&
+    [ "$(tail -1 "$TMP/out.txt")" = "1 passed, 0 failed" ]; then
+    pass "one case as a table"
+else
+    fail "one case as a table" "exit $rc, $(tail -1 "$TMP/out.txt")"
+fi
+
+# --list names every case.
+"$BIN" validate --list >"$TMP/list" 2>&1
+ok=1
+for c in $CASES; do grep -q "^$c " "$TMP/list" || ok=0; done
+if [ $ok = 1 ]; then pass "--list"; else fail "--list" "$(cat "$TMP/list")"; fi
+
+# Usage errors: exit 2, nothing run.
+"$BIN" validate fem-patch no-such-case >"$TMP/out" 2>"$TMP/err"
+rc=$?
+if [ $rc = 2 ] && grep -q "unknown case 'no-such-case'" "$TMP/err" && ! grep -q "fem-patch" "$TMP/err"; then
+    pass "unknown case: exit 2 before running"
+else
+    fail "unknown case: exit 2 before running" "exit $rc: $(head -2 "$TMP/err")"
+fi
+"$BIN" validate --bogus >"$TMP/out" 2>"$TMP/err"
+rc=$?
+if [ $rc = 2 ] && grep -q "unknown option '--bogus'" "$TMP/err"; then
+    pass "unknown option: exit 2"
+else
+    fail "unknown option: exit 2" "exit $rc"
+fi
+
+echo "$PASSED passed, $FAILED failed"
+[ "$FAILED" = 0 ]
