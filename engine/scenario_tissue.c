@@ -9,8 +9,11 @@
 int ns_scenario_tissue(const NsScenario *sc, const NsTissueParams *params, NsTissue *t, char *err,
                        int err_sz)
 {
-    int n = sc->region_count > 0 ? sc->region_count : 1;
-    NsTissueMaterial *mats = calloc((size_t)n, sizeof *mats);
+    if (sc->region_count < 1) {
+        snprintf(err, (size_t)err_sz, "%s: the scenario's tissue has no regions", sc->path);
+        return -1;
+    }
+    NsTissueMaterial *mats = calloc((size_t)sc->region_count, sizeof *mats);
     if (!mats) {
         snprintf(err, (size_t)err_sz, "out of memory");
         return -1;

@@ -588,6 +588,11 @@ int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *node_fix
 {
     NsSolveStats st = {0};
     st.factor_age = -1;
+    if (!s) { /* ns_solver_create ran out of memory: fail the solve, not the process */
+        if (stats)
+            *stats = st;
+        return -1;
+    }
     s->solves++;
     int n3 = 3 * A->n;
     int nfree = number_dofs(s, A->n, node_fixed);

@@ -81,8 +81,9 @@ void ns_solver_refresh(NsSolver *s);
 
 /* Solves A x = b. dof_fixed (3n entries, may be NULL) marks Dirichlet DOFs. x holds the
  * initial guess (and the fixed values) on entry. tol is relative to ||b_f - A_fc x_c||.
- * Returns 0, or -1 on a CHOLMOD failure (not positive definite, memory) with stats filled as
- * far as they got. Non-convergence within max_iter is reported in stats, not as an error. */
+ * Returns 0, or -1 on a CHOLMOD failure (not positive definite, memory) or a NULL solver (its
+ * creation failed), with stats filled as far as they got. Non-convergence within max_iter is
+ * reported in stats, not as an error. */
 int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed, const double *b,
                     double *x, double tol, int max_iter, NsSolveStats *stats);
 
