@@ -68,22 +68,29 @@ int main(int argc, char **argv)
     p.solve_tol = 1e-6;   /* relative residual, as an interactive step would use */
     p.threads = threads;
     NsTissue t[KINDS];
-    NsSolver *s[KINDS];
-    double *total = malloc((size_t)KINDS * steps * sizeof(double));
-    double *solve = malloc((size_t)KINDS * steps * sizeof(double));
-    double *iters = malloc((size_t)KINDS * steps * sizeof(double));
-    double *force = malloc((size_t)KINDS * steps * sizeof(double));
-    double *jac = malloc((size_t)KINDS * steps * sizeof(double));
-    double *frac = malloc((size_t)KINDS * steps * sizeof(double));
+    NsSolver *s[KINDS] = {NULL};
+    memset(t, 0, sizeof t); /* ns_tissue_free is safe on a zeroed tissue */
+    int rc = 1;
+    /* Six per-step series per solver: total, solve, iterations, force, Jacobian, fraction. */
+    double *buf = malloc((size_t)6 * KINDS * steps * sizeof(double));
+    size_t stride = (size_t)KINDS * steps;
+    double *total = buf, *solve = buf + stride, *iters = buf + 2 * stride,
+           *force = buf + 3 * stride, *jac = buf + 4 * stride, *frac = buf + 5 * stride;
     int refactors[KINDS] = {0}, warnings[KINDS] = {0};
-    if (!total || !solve || !iters || !force || !jac || !frac)
-        return 1;
+    if (!buf) {
+        fprintf(stderr, "bench_tissue: out of memory\n");
+        goto done;
+    }
     for (int k = 0; k < KINDS; k++) {
         if (ns_scenario_tissue(&sc, &p, &t[k], err, sizeof err)) {
             fprintf(stderr, "bench_tissue: %s\n", err);
-            return 1;
+            goto done;
         }
         s[k] = ns_solver_create(kinds[k]);
+        if (!s[k]) {
+            fprintf(stderr, "bench_tissue: out of memory\n");
+            goto done;
+        }
         ns_solver_set_threads(s[k], threads);
         if (refresh > 0)
             ns_solver_set_refresh_iterations(s[k], refresh);
@@ -97,7 +104,7 @@ int main(int argc, char **argv)
             NsTissueStats st;
             if (ns_tissue_step(&t[k], s[k], dt, NULL, &st)) {
                 fprintf(stderr, "bench_tissue: %s: step %d failed\n", ns_solver_name(kinds[k]), i);
-                return 1;
+                goto done;
             }
             total[k * steps + i] = st.total_ms;
             solve[k * steps + i] = st.solve_ms;
@@ -125,16 +132,13 @@ int main(int argc, char **argv)
     }
     printf("median step, cg / stale-pcg: %.2fx; final positions differ by %.2e m\n",
            med[0] / med[KINDS - 1], dmax);
+    rc = 0;
+done:
     for (int k = 0; k < KINDS; k++) {
         ns_solver_destroy(s[k]);
         ns_tissue_free(&t[k]);
     }
-    free(total);
-    free(solve);
-    free(iters);
-    free(force);
-    free(jac);
-    free(frac);
+    free(buf);
     ns_scenario_free(&sc);
-    return 0;
+    return rc;
 }
