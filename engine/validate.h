@@ -32,6 +32,10 @@ typedef struct NsValidateCase {
 extern const NsValidateCase ns_validate_fem_cases[];
 extern const int ns_validate_fem_case_count;
 
+/* The needle rod cases (engine/validate_rod.c). */
+extern const NsValidateCase ns_validate_rod_cases[];
+extern const int ns_validate_rod_case_count;
+
 /* Appends printf-style text to r->detail. */
 void ns_validate_detail(NsValidateResult *r, const char *fmt, ...)
     __attribute__((format(printf, 2, 3)));

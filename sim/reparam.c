@@ -182,6 +182,29 @@ int ns_rod_resample(NsRod *r, const double *xn, const double *s, int m)
     return 0;
 }
 
+/* The rod's unit tangent at node i for the split cubic. */
+static void node_tangent(const NsRod *r, int i, double *T)
+{
+    int ne = r->nodes - 1;
+    double a[3] = {0, 0, 0}, b[3] = {0, 0, 0};
+    if (i > 0)
+        for (int k = 0; k < 3; k++)
+            a[k] = r->x[3 * i + k] - r->x[3 * (i - 1) + k];
+    if (i < ne)
+        for (int k = 0; k < 3; k++)
+            b[k] = r->x[3 * (i + 1) + k] - r->x[3 * i + k];
+    double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    double lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    int sleeve_exit = r->held == 2 && i == 1;
+    for (int k = 0; k < 3; k++) {
+        double u = la > 0.0 ? a[k] / la : 0.0, w = lb > 0.0 ? b[k] / lb : 0.0;
+        T[k] = i == 0 ? w : i == ne || sleeve_exit ? u : u + w;
+    }
+    double l = sqrt(T[0] * T[0] + T[1] * T[1] + T[2] * T[2]);
+    for (int k = 0; k < 3; k++)
+        T[k] = l > 0.0 ? T[k] / l : 0.0;
+}
+
 int ns_rod_reparameterize(NsRod *r, NsRodStats *stats)
 {
     int n = r->nodes, ne = n - 1;
@@ -233,10 +256,9 @@ int ns_rod_reparameterize(NsRod *r, NsRodStats *stats)
         return 0;
     }
     double *d = malloc((size_t)n * sizeof *d), *xn = malloc(3 * (size_t)m * sizeof *xn);
-    double *s = malloc((size_t)m * sizeof *s), *cub = malloc(3 * (size_t)m * sizeof *cub);
-    double *work = malloc((2 * (size_t)n + 3 + 2 * (size_t)(n > m ? n : m)) * sizeof *work);
+    double *s = malloc((size_t)m * sizeof *s);
     int rc = -1;
-    if (!d || !xn || !s || !cub || !work)
+    if (!d || !xn || !s)
         goto done;
     arc_parameters(r, d);
     /* New node list: kept old nodes at their old parameters, and split points at equal
@@ -251,24 +273,29 @@ int ns_rod_reparameterize(NsRod *r, NsRodStats *stats)
         if (i < ne && pieces[i] > 1)
             for (int p = 1; p < pieces[i]; p++) {
                 s[q] = d[i] + (d[i + 1] - d[i]) * (double)p / (double)pieces[i];
-                xn[3 * q] = NAN; /* filled from the cubic below */
                 q++;
             }
     }
-    /* Split points lie on the interpolating cubic through all old nodes (Akima, per coordinate,
-     * in the arc parameter): for a single split this is the midpoint of the paper's cubic. */
-    double *xs = work + 2 * (size_t)n + 3, *ys = xs + (n > m ? n : m);
-    for (int k = 0; k < 3; k++) {
-        for (int i = 0; i < n; i++)
-            ys[i] = r->x[3 * i + k];
-        if (ns_akima(d, ys, n, s, xs, m, work) != 0)
-            goto done;
-        for (int j = 0; j < m; j++)
-            cub[3 * j + k] = xs[j];
+    /* Split points lie on the interpolating cubic of their edge: the Hermite cubic through its two
+     * nodes with the rod's tangents there (the unit mean of the two edge tangents at an interior
+     * node, the sleeve axis at the sleeve's exit, the edge's own at the tip), which reproduces a
+     * circular arc to third order. A single split takes the cubic's midpoint, as the paper. */
+    for (int i = 0, q2 = 0; i < n; i++) {
+        q2 += keep[i];
+        if (i >= ne || pieces[i] < 2)
+            continue;
+        double T0[3], T1[3], l = d[i + 1] - d[i];
+        node_tangent(r, i, T0);
+        node_tangent(r, i + 1, T1);
+        for (int p = 1; p < pieces[i]; p++, q2++) {
+            double f = (double)p / (double)pieces[i], f2 = f * f, f3 = f2 * f;
+            double h00 = 2 * f3 - 3 * f2 + 1, h10 = f3 - 2 * f2 + f, h01 = -2 * f3 + 3 * f2;
+            double h11 = f3 - f2;
+            for (int k = 0; k < 3; k++)
+                xn[3 * q2 + k] = h00 * r->x[3 * i + k] + h10 * l * T0[k] +
+                                 h01 * r->x[3 * (i + 1) + k] + h11 * l * T1[k];
+        }
     }
-    for (int j = 0; j < m; j++)
-        if (isnan(xn[3 * j]))
-            memcpy(xn + 3 * j, cub + 3 * j, 3 * sizeof(double));
     rc = ns_rod_resample(r, xn, s, m);
     if (rc == 0 && stats) {
         stats->splits += splits;
@@ -280,7 +307,5 @@ done:
     free(d);
     free(xn);
     free(s);
-    free(cub);
-    free(work);
     return rc;
 }

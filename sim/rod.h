@@ -62,16 +62,23 @@ typedef struct NsRodParams {
      * at creation are split, and those shorter than merge_factor times the shortest merged. */
     double split_factor, merge_factor;
     int auto_reparam;   /* split and merge at the end of every ns_rod_step (standalone rod) */
+    /* Newton iterations of the step: the paper takes one (§3.1); more are taken, up to
+     * newton_max, while an edge is stretched or compressed by more than newton_strain_tol
+     * (dimensionless) after the step, a sign that the linearization did not hold. */
+    int newton_max;
+    double newton_strain_tol;
     int twist_max_iter; /* Newton iterations of the quasi-static twist per update */
     double twist_tol;   /* [rad]: stop when no twist angle moves by more than this */
 } NsRodParams;
 
 /* A stainless-steel 18-gauge brachytherapy needle (E 200 GPa, nu 0.3, 1.27 / 0.84 mm,
- * 8000 kg/m^3), no gravity, Newmark 1/4, 1/2, light damping, split 2, merge 0.5. */
+ * 8000 kg/m^3), no gravity, Newmark 1/4, 1/2, light damping, split 2, merge 0.5, up to 8
+ * Newton iterations while a strain exceeds 1e-4. */
 NsRodParams ns_default_rod_params(void);
 
 typedef struct NsRodStats {
     double force_ms, solve_ms, twist_ms, total_ms; /* wall times [ms] */
+    int newton_iterations; /* of the step (1 = the paper's single linearized solve) */
     int twist_iterations;  /* Newton iterations of the quasi-static twist (last update) */
     int twist_unconverged; /* updates whose twist did not reach twist_tol */
     int solve_failed;      /* banded solves that met a matrix that is not positive definite */
@@ -163,11 +170,18 @@ void ns_rod_forces(NsRod *r, const double *ext);
  * increments, and stats say why). */
 int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats);
 
-/* Static equilibrium under ext (may be NULL) and gravity, held nodes fixed: Newton steps with
- * K and a backtracking line search on the potential energy. Stops when the largest free force
+/* Static equilibrium under ext (may be NULL) and gravity, held nodes fixed, velocities zeroed:
+ * Newton steps with K (with the springs' exact geometric stiffness under compression, shifted
+ * Levenberg-Marquardt style where that is not definite) and a backtracking line search on the
+ * potential energy; the quasi-static twist is solved at every iterate. Stops when the largest free force
  * is below tol times the largest applied force (or reaction), or after max_iter iterations.
  * Returns the iterations used, or -1 on failure (non-finite values, no descent). */
 int ns_rod_static_solve(NsRod *r, const double *ext, double tol, int max_iter, NsRodStats *stats);
+
+/* 1 if the current state is a stable equilibrium configuration under ext and gravity: the exact
+ * stiffness (as the static solve's, with the springs' geometric stiffness) is positive definite
+ * on the free DOFs; 0 if not (a buckling load has been passed). Overwrites r->force, K and D. */
+int ns_rod_is_stable(NsRod *r, const double *ext);
 
 /* 64-bit FNV-1a hash of the node count and the bits of x, v, a, theta and rest_len. */
 uint64_t ns_rod_state_hash(const NsRod *r);

@@ -22,7 +22,8 @@ fail() {
     FAILED=$((FAILED + 1))
 }
 
-CASES="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy"
+CASES="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy
+rod-cantilever rod-buckling rod-twist rod-length rod-reparam"
 
 # The whole suite, as JSON.
 "$BIN" validate --json >"$TMP/out.json" 2>"$TMP/err"
