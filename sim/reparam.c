@@ -49,7 +49,10 @@ static void arc_parameters(const NsRod *r, double *d)
     }
 }
 
-int ns_rod_resample(NsRod *r, const double *xn, const double *s, int m)
+/* The body of ns_rod_resample; linear_rest carries the rest lengths' running sum linearly
+ * instead of by Akima (the split and merge below: each piece of a split edge then gets its share
+ * of the old rest length in proportion, and a merged edge the exact sum). */
+static int resample(NsRod *r, const double *xn, const double *s, int m, int linear_rest)
 {
     int n = r->nodes, ne = n - 1, me = m - 1;
     if (m < 3)
@@ -74,7 +77,8 @@ int ns_rod_resample(NsRod *r, const double *xn, const double *s, int m)
     /* Old data: parameters d, running rest length L, edge midpoints sm with Bishop angles phi,
      * rest curvature (2 per node), v and a. New: the same at s. */
     size_t per = 17;
-    double *buf = malloc((size_t)big * per * sizeof(double) + (2 * (size_t)big + 3) * sizeof(double));
+    double *buf =
+        malloc((size_t)big * per * sizeof(double) + (2 * (size_t)big + 3) * sizeof(double));
     uint8_t *pin = malloc((size_t)m);
     if (!buf || !pin) {
         free(buf);
@@ -131,7 +135,7 @@ int ns_rod_resample(NsRod *r, const double *xn, const double *s, int m)
     double *newlen = kc; /* reuse */
     for (int j = 0; j < me; j++) {
         double l = Ln[j + 1] - Ln[j];
-        if (!(l > 0.0))
+        if (linear_rest || !(l > 0.0))
             l = lerp_at(d, L, 1, n, s[j + 1]) - lerp_at(d, L, 1, n, s[j]);
         if (!(l > 0.0)) {
             free(buf);
@@ -180,6 +184,11 @@ int ns_rod_resample(NsRod *r, const double *xn, const double *s, int m)
     free(buf);
     free(pin);
     return 0;
+}
+
+int ns_rod_resample(NsRod *r, const double *xn, const double *s, int m)
+{
+    return resample(r, xn, s, m, 0);
 }
 
 /* The rod's unit tangent at node i for the split cubic. */
@@ -296,7 +305,7 @@ int ns_rod_reparameterize(NsRod *r, NsRodStats *stats)
                                  h01 * r->x[3 * (i + 1) + k] + h11 * l * T1[k];
         }
     }
-    rc = ns_rod_resample(r, xn, s, m);
+    rc = resample(r, xn, s, m, 1);
     if (rc == 0 && stats) {
         stats->splits += splits;
         stats->merges += merges;

@@ -123,11 +123,14 @@ static int check_params(const NsRodParams *p, char *err, int err_sz)
 {
     const NsRodMaterial *m = &p->material;
     if (!(m->youngs > 0.0) || !isfinite(m->youngs)) {
-        ns_set_err(err, err_sz, "needle: youngs must be positive (got %g Pa)", m->youngs);
+        ns_set_err(err, err_sz, "needle: youngs must be finite and positive (got %g Pa)",
+                   m->youngs);
         return -1;
     }
     if (m->shear != 0.0 && (!(m->shear > 0.0) || !isfinite(m->shear))) {
-        ns_set_err(err, err_sz, "needle: shear must be positive (got %g Pa)", m->shear);
+        ns_set_err(err, err_sz,
+                   "needle: shear must be finite and positive, or 0 to use poisson (got %g Pa)",
+                   m->shear);
         return -1;
     }
     if (m->shear == 0.0 && !(m->poisson > -1.0 && m->poisson < 0.5)) {
@@ -135,7 +138,7 @@ static int check_params(const NsRodParams *p, char *err, int err_sz)
         return -1;
     }
     if (!(m->outer_diameter > 0.0) || !isfinite(m->outer_diameter)) {
-        ns_set_err(err, err_sz, "needle: outer diameter must be positive (got %g m)",
+        ns_set_err(err, err_sz, "needle: outer diameter must be finite and positive (got %g m)",
                    m->outer_diameter);
         return -1;
     }
@@ -146,7 +149,8 @@ static int check_params(const NsRodParams *p, char *err, int err_sz)
         return -1;
     }
     if (!(m->density > 0.0) || !isfinite(m->density)) {
-        ns_set_err(err, err_sz, "needle: density must be positive (got %g kg/m^3)", m->density);
+        ns_set_err(err, err_sz, "needle: density must be finite and positive (got %g kg/m^3)",
+                   m->density);
         return -1;
     }
     if (p->tip != NS_TIP_SYMMETRIC && p->tip != NS_TIP_BEVEL) {
@@ -163,18 +167,36 @@ static int check_params(const NsRodParams *p, char *err, int err_sz)
                    p->beta, p->gamma);
         return -1;
     }
-    if (!(p->damping_mass >= 0.0) || !(p->damping_stretch >= 0.0) || !(p->stretch_scale > 0.0)) {
-        ns_set_err(err, err_sz, "needle: damping must be >= 0 and stretch_scale > 0");
+    if (!(p->damping_mass >= 0.0) || !isfinite(p->damping_mass) || !(p->damping_stretch >= 0.0) ||
+        !isfinite(p->damping_stretch)) {
+        ns_set_err(err, err_sz,
+                   "needle: damping must be finite and >= 0 (got damping_mass %g 1/s, "
+                   "damping_stretch %g s)",
+                   p->damping_mass, p->damping_stretch);
         return -1;
     }
-    if (p->newton_max < 1 || !(p->newton_strain_tol > 0.0)) {
-        ns_set_err(err, err_sz, "needle: newton_max must be >= 1 and newton_strain_tol > 0");
+    if (!(p->stretch_scale > 0.0) || !isfinite(p->stretch_scale)) {
+        ns_set_err(err, err_sz, "needle: stretch_scale must be finite and > 0 (got %g)",
+                   p->stretch_scale);
+        return -1;
+    }
+    if (p->twist_max_iter < 1 || !(p->twist_tol > 0.0) || !isfinite(p->twist_tol)) {
+        ns_set_err(err, err_sz,
+                   "needle: twist_max_iter must be >= 1 and twist_tol finite and > 0 (got %d, %g "
+                   "rad)",
+                   p->twist_max_iter, p->twist_tol);
+        return -1;
+    }
+    if (p->newton_max < 1 || !(p->newton_strain_tol > 0.0) || !isfinite(p->newton_strain_tol)) {
+        ns_set_err(err, err_sz,
+                   "needle: newton_max must be >= 1 and newton_strain_tol finite and > 0 (got %d, "
+                   "%g)",
+                   p->newton_max, p->newton_strain_tol);
         return -1;
     }
     if (!(p->merge_factor >= 0.0) || !(p->split_factor > 2.0 * p->merge_factor) ||
         !isfinite(p->split_factor)) {
-        ns_set_err(err, err_sz,
-                   "needle: split_factor must exceed twice merge_factor (got %g, %g)",
+        ns_set_err(err, err_sz, "needle: split_factor must exceed twice merge_factor (got %g, %g)",
                    p->split_factor, p->merge_factor);
         return -1;
     }
@@ -190,8 +212,9 @@ static int check_params(const NsRodParams *p, char *err, int err_sz)
 
 /* Scratch doubles per node slot: the edge frames t, len, m1, m2, d1 (13, used by the energy and
  * force evaluations) and, after them, the step's or static solve's vectors (4 x 3), DOF mask
- * (3 bytes, within 1 double) and the step's start x, v, a (3 x 3). */
-#define WORK_PER_NODE 35
+ * (3 bytes, within 1 double), the step's start x, v, a (3 x 3), and its saved strains, twist
+ * angles and accelerations (1 + 1 + 3). */
+#define WORK_PER_NODE 40
 
 int rod_reserve(NsRod *r, int cap)
 {
@@ -201,12 +224,12 @@ int rod_reserve(NsRod *r, int cap)
     while (c < cap)
         c *= 2;
     size_t n = (size_t)c;
-#define GROW(field, count)                                                                     \
-    do {                                                                                       \
-        void *p_ = realloc(r->field, (count) * sizeof *r->field);                              \
-        if (!p_)                                                                               \
-            return -1;                                                                         \
-        r->field = p_;                                                                         \
+#define GROW(field, count)                                                                         \
+    do {                                                                                           \
+        void *p_ = realloc(r->field, (count) * sizeof *r->field);                                  \
+        if (!p_)                                                                                   \
+            return -1;                                                                             \
+        r->field = p_;                                                                             \
     } while (0)
     GROW(x, 3 * n);
     GROW(v, 3 * n);
@@ -223,15 +246,34 @@ int rod_reserve(NsRod *r, int cap)
     GROW(work, WORK_PER_NODE * n);
 #undef GROW
     size_t old = (size_t)r->cap;
-    memset(r->pinned + old, 0, n - old);
-    memset(r->ref_twist + old, 0, (n - old) * sizeof(double));
-    memset(r->rest_curv + 2 * old, 0, 2 * (n - old) * sizeof(double));
+#define ZERO_TAIL(field, per) memset(r->field + (per)*old, 0, (per) * (n - old) * sizeof *r->field)
+    ZERO_TAIL(x, 3);
+    ZERO_TAIL(v, 3);
+    ZERO_TAIL(a, 3);
+    ZERO_TAIL(mass, 1);
+    ZERO_TAIL(force, 3);
+    ZERO_TAIL(rest_len, 1);
+    ZERO_TAIL(theta, 1);
+    ZERO_TAIL(ref_t, 3);
+    ZERO_TAIL(ref_d1, 3);
+    ZERO_TAIL(ref_twist, 1);
+    ZERO_TAIL(rest_curv, 2);
+    ZERO_TAIL(pinned, 1);
+#undef ZERO_TAIL
+    NsBanded K, D, A;
+    if (ns_banded_init(&K, c, 2) || ns_banded_init(&D, c, 2) || ns_banded_init(&A, c, 2)) {
+        ns_banded_free(&K);
+        ns_banded_free(&D);
+        ns_banded_free(&A);
+        return -1; /* the arrays grew, the matrices and cap did not: the rod still works */
+    }
     ns_banded_free(&r->K);
     ns_banded_free(&r->D);
     ns_banded_free(&r->A);
+    r->K = K;
+    r->D = D;
+    r->A = A;
     r->cap = c;
-    if (ns_banded_init(&r->K, c, 2) || ns_banded_init(&r->D, c, 2) || ns_banded_init(&r->A, c, 2))
-        return -1;
     return 0;
 }
 
@@ -350,9 +392,8 @@ typedef struct Hinge {
     double dk1_de0[3], dk1_de1[3], dk2_de0[3], dk2_de1[3];
 } Hinge;
 
-static void hinge_eval(const double *t0, const double *t1, double l0, double l1,
-                       const double *m1a, const double *m2a, const double *m1b,
-                       const double *m2b, Hinge *h)
+static void hinge_eval(const double *t0, const double *t1, double l0, double l1, const double *m1a,
+                       const double *m2a, const double *m1b, const double *m2b, Hinge *h)
 {
     double chi = curvature_binormal(t0, t1, h->kb);
     double tt[3], mm1[3], mm2[3];
@@ -406,8 +447,7 @@ void ns_rod_tip_frame(const NsRod *r, double *t, double *m1, double *m2)
 
 /* ---- energies ---- */
 
-double ns_rod_energy(const NsRod *r, const double *x, double *bend, double *twist,
-                     double *stretch)
+double ns_rod_energy(const NsRod *r, const double *x, double *bend, double *twist, double *stretch)
 {
     if (!x)
         x = r->x;
@@ -520,29 +560,48 @@ static double twist_energy(const NsRod *r, const TwistNode *tn, const double *th
     return E;
 }
 
-/* Solves the tridiagonal system (diagonal hd, off-diagonal ho) for the free angles j >= 1 with
- * right-hand side -g into dx; theta_0 is held. Returns -1 if a pivot is not positive. */
-static int twist_tridiag(int ne, const double *hd, const double *ho, const double *g, double *dx,
-                         double *cp)
+/* Solves the tridiagonal system (diagonal hd, off-diagonal ho) for the angles j >= first with
+ * right-hand side -g into dx; angles before first are held (dx 0). Returns -1 if a pivot is not
+ * clearly positive (indefinite, or singular: a free rod whose energy does not depend on a common
+ * turn of all its angles). */
+static int twist_tridiag(int ne, int first, const double *hd, const double *ho, const double *g,
+                         double *dx, double *cp)
 {
-    dx[0] = 0.0;
-    if (ne < 2)
+    for (int j = 0; j < first && j < ne; j++)
+        dx[j] = 0.0;
+    if (ne <= first)
         return 0;
-    double piv = hd[1];
-    if (!(piv > 0.0))
+    double piv = hd[first];
+    if (!(piv > 1e-12 * fabs(hd[first])) || !(piv > 0.0))
         return -1;
-    cp[1] = ho[1] / piv;
-    dx[1] = -g[1] / piv;
-    for (int j = 2; j < ne; j++) {
+    cp[first] = ho[first] / piv;
+    dx[first] = -g[first] / piv;
+    for (int j = first + 1; j < ne; j++) {
         piv = hd[j] - ho[j - 1] * cp[j - 1];
-        if (!(piv > 0.0))
+        if (!(piv > 1e-12 * fabs(hd[j])) || !(piv > 0.0))
             return -1;
         cp[j] = ho[j] / piv;
         dx[j] = (-g[j] - ho[j - 1] * dx[j - 1]) / piv;
     }
-    for (int j = ne - 2; j >= 1; j--)
+    for (int j = ne - 2; j >= first; j--)
         dx[j] -= cp[j] * dx[j + 1];
     return 0;
+}
+
+/* Newton direction for the twist: the full Hessian, else its Gauss-Newton part; for a free rod
+ * all angles move, else (or if that is singular) theta_0 is held. Returns the first free angle,
+ * or -1 if no direction was found. */
+static int twist_direction(const NsRod *r, const TwistNode *tn, double *g, double *hd, double *ho,
+                           double *dx, double *cp)
+{
+    int ne = r->nodes - 1;
+    for (int first = r->held ? 1 : 0; first <= 1; first++)
+        for (int gn = 0; gn <= 1; gn++) {
+            twist_energy(r, tn, r->theta, g, hd, ho, gn);
+            if (twist_tridiag(ne, first, hd, ho, g, dx, cp) == 0)
+                return first;
+        }
+    return -1;
 }
 
 static void solve_twist(NsRod *r, NsRodStats *stats)
@@ -573,14 +632,12 @@ static void solve_twist(NsRod *r, NsRodStats *stats)
     }
     int it, converged = ne < 2;
     for (it = 0; it < r->params.twist_max_iter && !converged; it++) {
-        double E = twist_energy(r, tn, r->theta, g, hd, ho, 0);
-        if (twist_tridiag(ne, hd, ho, g, dx, cp) != 0) {
-            twist_energy(r, tn, r->theta, g, hd, ho, 1); /* fall back to Gauss-Newton */
-            if (twist_tridiag(ne, hd, ho, g, dx, cp) != 0)
-                break;
-        }
+        double E = twist_energy(r, tn, r->theta, NULL, NULL, NULL, 0);
+        int first = twist_direction(r, tn, g, hd, ho, dx, cp);
+        if (first < 0)
+            break;
         double step = 0.0, slope = 0.0;
-        for (int j = 1; j < ne; j++) {
+        for (int j = first; j < ne; j++) {
             step = fabs(dx[j]) > step ? fabs(dx[j]) : step;
             slope += g[j] * dx[j];
         }
@@ -590,15 +647,14 @@ static void solve_twist(NsRod *r, NsRodStats *stats)
         }
         double alpha = 1.0;
         for (int ls = 0; ls < 30; ls++) {
-            trial[0] = r->theta[0];
-            for (int j = 1; j < ne; j++)
+            for (int j = 0; j < ne; j++)
                 trial[j] = r->theta[j] + alpha * dx[j];
             double Et = twist_energy(r, tn, trial, NULL, NULL, NULL, 0);
             if (Et <= E + 1e-4 * alpha * slope || alpha * step <= r->params.twist_tol)
                 break;
             alpha *= 0.5;
         }
-        for (int j = 1; j < ne; j++)
+        for (int j = first; j < ne; j++)
             r->theta[j] += alpha * dx[j];
         if (alpha * step <= r->params.twist_tol)
             converged = 1;
@@ -621,7 +677,7 @@ void ns_rod_update_frames(NsRod *r, NsRodStats *stats)
             e[k] = r->x[3 * (j + 1) + k] - r->x[3 * j + k];
         double l = norm3(e);
         if (!(l > 0.0))
-            continue; /* a collapsed edge keeps its old frame; ns_rod_step rejects such states */
+            continue; /* a collapsed edge keeps its old frame (its forces come out NaN) */
         for (int k = 0; k < 3; k++)
             t[k] = e[k] / l;
         transport(r->ref_t + 3 * j, t, r->ref_d1 + 3 * j, d1);
@@ -833,8 +889,10 @@ static void forces_impl(NsRod *r, const double *ext, int clamp)
         /* dE/de0, dE/de1. The reference twist's gradient is kb / (2 l) on both edges. */
         double g0[3], g1[3];
         for (int c = 0; c < 3; c++) {
-            g0[c] = cb * (r1 * h.dk1_de0[c] + r2 * h.dk2_de0[c]) + ct * tw * h.kb[c] / (2.0 * len[i - 1]);
-            g1[c] = cb * (r1 * h.dk1_de1[c] + r2 * h.dk2_de1[c]) + ct * tw * h.kb[c] / (2.0 * len[i]);
+            g0[c] = cb * (r1 * h.dk1_de0[c] + r2 * h.dk2_de0[c]) +
+                    ct * tw * h.kb[c] / (2.0 * len[i - 1]);
+            g1[c] =
+                cb * (r1 * h.dk1_de1[c] + r2 * h.dk2_de1[c]) + ct * tw * h.kb[c] / (2.0 * len[i]);
         }
         for (int c = 0; c < 3; c++) {
             F[3 * (i - 1) + c] += g0[c];
@@ -857,8 +915,8 @@ static void forces_impl(NsRod *r, const double *ext, int clamp)
                 double blk[9];
                 for (int p = 0; p < 3; p++)
                     for (int q = 0; q < 3; q++)
-                        blk[3 * p + q] = -cb * (G1[3 * a + p] * G1[3 * b + q] +
-                                                G2[3 * a + p] * G2[3 * b + q]);
+                        blk[3 * p + q] =
+                            -cb * (G1[3 * a + p] * G1[3 * b + q] + G2[3 * a + p] * G2[3 * b + q]);
                 add_block(&r->K, i - 1 + a, i - 1 + b, blk, 1.0);
             }
     }
@@ -867,8 +925,8 @@ static void forces_impl(NsRod *r, const double *ext, int clamp)
     for (int i = 0; i < n; i++) {
         double mi = r->mass[i];
         for (int c = 0; c < 3; c++)
-            F[3 * i + c] += mi * (r->params.gravity[c] - am * r->v[3 * i + c]) +
-                            (ext ? ext[3 * i + c] : 0.0);
+            F[3 * i + c] +=
+                mi * (r->params.gravity[c] - am * r->v[3 * i + c]) + (ext ? ext[3 * i + c] : 0.0);
         double *dd = ns_banded_block(&r->D, i, i);
         dd[0] -= am * mi;
         dd[4] -= am * mi;
@@ -915,14 +973,26 @@ static void build_system(NsRod *r, double mc, double kx, double kv)
 }
 
 /* Largest |l / L - 1| over the edges. */
-static double max_strain(const NsRod *r)
+static void edge_strains(const NsRod *r, double *eps)
+{
+    for (int j = 0; j + 1 < r->nodes; j++) {
+        double e[3];
+        for (int k = 0; k < 3; k++)
+            e[k] = r->x[3 * (j + 1) + k] - r->x[3 * j + k];
+        eps[j] = norm3(e) / r->rest_len[j] - 1.0;
+    }
+}
+
+/* Largest change of an edge's strain l / L - 1 over the step, from eps0 (taken at its start
+ * with the rest lengths of then; steady insertion keeps edge 1's strain, so it does not count). */
+static double strain_jump(const NsRod *r, const double *eps0)
 {
     double worst = 0.0;
     for (int j = 0; j + 1 < r->nodes; j++) {
         double e[3];
         for (int k = 0; k < 3; k++)
             e[k] = r->x[3 * (j + 1) + k] - r->x[3 * j + k];
-        worst = fmax(worst, fabs(norm3(e) / r->rest_len[j] - 1.0));
+        worst = fmax(worst, fabs(norm3(e) / r->rest_len[j] - 1.0 - eps0[j]));
     }
     return worst;
 }
@@ -950,8 +1020,22 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
     NsRodStats st;
     memset(&st, 0, sizeof st);
     double t0 = now_ms();
-    int n = r->nodes, n3 = 3 * n;
+    int n = r->nodes, n3 = 3 * n, ne = n - 1;
     double beta = r->params.beta, gamma = r->params.gamma;
+    if (!(dt > 0.0) || !isfinite(dt) || !isfinite(r->v_insert) || !isfinite(r->twist_rate) ||
+        !isfinite(r->v_base[0]) || !isfinite(r->v_base[1]) || !isfinite(r->v_base[2])) {
+        st.nan_count++; /* a bad time step or control: refused, nothing changes */
+        if (stats)
+            *stats = st;
+        return -1;
+    }
+    /* What the step may change before it can fail, kept to undo it: the strains and the rest
+     * length of edge 1 (insertion), the twist angles (base rotation), a (the first step). */
+    double *eps0 = r->work + 35 * (size_t)r->cap, *theta0 = eps0 + r->cap;
+    double *asave = theta0 + r->cap, len1 = ne > 1 ? r->rest_len[1] : 0.0;
+    edge_strains(r, eps0);
+    memcpy(theta0, r->theta, (size_t)ne * sizeof *theta0);
+    memcpy(asave, r->a, (size_t)n3 * sizeof *asave);
     apply_controls(r, dt, &st);
     double tf = now_ms();
     ns_rod_forces(r, ext);
@@ -991,6 +1075,11 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
     if (!finite) {
         st.solve_failed += rc != 0;
         st.nan_count += rc == 0;
+        if (ne > 1)
+            r->rest_len[1] = len1;
+        memcpy(r->theta, theta0, (size_t)ne * sizeof *theta0);
+        memcpy(r->a, asave, (size_t)n3 * sizeof *asave);
+        rod_masses(r);
         st.total_ms = now_ms() - t0;
         if (stats)
             *stats = st;
@@ -1014,7 +1103,8 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
      * linearization stretched edges by more than newton_strain_tol (a large load or time step
      * on the free needle), iterate: residual R = F(x, v) - M a at the current iterate, the same
      * system matrix rebuilt there, a += A^-1 R. */
-    while (st.newton_iterations < r->params.newton_max && max_strain(r) > r->params.newton_strain_tol) {
+    while (st.newton_iterations < r->params.newton_max &&
+           strain_jump(r, eps0) > r->params.newton_strain_tol) {
         ns_rod_forces(r, ext);
         build_system(r, 1.0, beta * dt * dt, gamma * dt);
         for (int i = 0; i < 3 * r->cap; i++) {
@@ -1055,8 +1145,7 @@ static double potential(const NsRod *r, const double *x, const double *ext)
     double E = ns_rod_energy(r, x, NULL, NULL, NULL);
     for (int i = 0; i < r->nodes; i++)
         for (int c = 0; c < 3; c++)
-            E -= (r->mass[i] * r->params.gravity[c] + (ext ? ext[3 * i + c] : 0.0)) *
-                 x[3 * i + c];
+            E -= (r->mass[i] * r->params.gravity[c] + (ext ? ext[3 * i + c] : 0.0)) * x[3 * i + c];
     return E;
 }
 
@@ -1183,20 +1272,20 @@ int ns_rod_is_stable(NsRod *r, const double *ext)
 uint64_t ns_rod_state_hash(const NsRod *r)
 {
     uint64_t h = 1469598103934665603ULL;
-#define MIX(ptr, bytes)                                                                        \
-    do {                                                                                       \
-        const unsigned char *p_ = (const unsigned char *)(ptr);                                \
-        for (size_t k_ = 0; k_ < (size_t)(bytes); k_++) {                                      \
-            h ^= p_[k_];                                                                       \
-            h *= 1099511628211ULL;                                                             \
-        }                                                                                      \
+#define MIX(ptr, bytes)                                                                            \
+    do {                                                                                           \
+        const unsigned char *p_ = (const unsigned char *)(ptr);                                    \
+        for (size_t k_ = 0; k_ < (size_t)(bytes); k_++) {                                          \
+            h ^= p_[k_];                                                                           \
+            h *= 1099511628211ULL;                                                                 \
+        }                                                                                          \
     } while (0)
     MIX(&r->nodes, sizeof r->nodes);
     MIX(r->x, 3 * (size_t)r->nodes * sizeof(double));
     MIX(r->v, 3 * (size_t)r->nodes * sizeof(double));
     MIX(r->a, 3 * (size_t)r->nodes * sizeof(double));
-    MIX(r->theta, (size_t)r->nodes * sizeof(double));
-    MIX(r->rest_len, (size_t)r->nodes * sizeof(double));
+    MIX(r->theta, (size_t)(r->nodes - 1) * sizeof(double));
+    MIX(r->rest_len, (size_t)(r->nodes - 1) * sizeof(double));
 #undef MIX
     return h;
 }

@@ -61,7 +61,7 @@ typedef struct NsRodParams {
     /* Reparameterization (§3.4.2): free edges longer than split_factor times the longest edge
      * at creation are split, and those shorter than merge_factor times the shortest merged. */
     double split_factor, merge_factor;
-    int auto_reparam;   /* split and merge at the end of every ns_rod_step (standalone rod) */
+    int auto_reparam; /* split and merge at the end of every ns_rod_step (standalone rod) */
     /* Newton iterations of the step: the paper takes one (§3.1); more are taken, up to
      * newton_max, while an edge is stretched or compressed by more than newton_strain_tol
      * (dimensionless) after the step, a sign that the linearization did not hold. */
@@ -89,16 +89,16 @@ typedef struct NsRodStats {
 typedef struct NsRod {
     NsRodParams params;
     /* Derived from the material at init (constant while stepping). */
-    double area;         /* cross-section A [m^2] */
-    double bend_stiff;   /* E I [N m^2] */
-    double twist_stiff;  /* G J [N m^2] */
-    double stretch_stiff; /* k_s = stretch_scale E A [N] */
-    double lin_density;  /* rho A [kg/m] */
+    double area;                         /* cross-section A [m^2] */
+    double bend_stiff;                   /* E I [N m^2] */
+    double twist_stiff;                  /* G J [N m^2] */
+    double stretch_stiff;                /* k_s = stretch_scale E A [N] */
+    double lin_density;                  /* rho A [kg/m] */
     double min_rest_edge, max_rest_edge; /* shortest and longest edge at creation [m] */
 
-    int nodes;    /* n >= 3; edges = n - 1 */
-    int cap;      /* allocated node slots */
-    int held;     /* nodes held by the sleeve: 2 (nodes 0 and 1) or 0 (a free rod) */
+    int nodes;         /* n >= 3; edges = n - 1 */
+    int cap;           /* allocated node slots */
+    int held;          /* nodes held by the sleeve: 2 (nodes 0 and 1) or 0 (a free rod) */
     double *x, *v, *a; /* (cap x 3) position [m], velocity [m/s], acceleration [m/s^2] */
     double *mass;      /* (cap) lumped [kg] */
     double *force;     /* (cap x 3) total force of the last evaluation [N] */
@@ -111,8 +111,8 @@ typedef struct NsRod {
     uint8_t *pinned;   /* (cap) caller's flag: node must survive reparameterization */
 
     /* Controls (§3.5), set by the caller between steps. */
-    double v_base[3]; /* sleeve velocity [m/s] */
-    double v_insert;  /* insertion speed [m/s] (negative retracts) */
+    double v_base[3];  /* sleeve velocity [m/s] */
+    double v_insert;   /* insertion speed [m/s] (negative retracts) */
     double twist_rate; /* base angular velocity phi [rad/s] */
 
     NsBanded K, D, A; /* dF/dx [N/m], dF/dv [N s/m], the Newmark system matrix */
@@ -136,8 +136,8 @@ void ns_rod_free(NsRod *r);
 void ns_rod_set_rest_curvature(NsRod *r, int i, double k1, double k2);
 
 /* Derived-quantity helpers. */
-double ns_rod_edges_length(const NsRod *r);   /* sum of current edge lengths [m] */
-double ns_rod_rest_length(const NsRod *r);    /* sum of rest lengths [m] */
+double ns_rod_edges_length(const NsRod *r); /* sum of current edge lengths [m] */
+double ns_rod_rest_length(const NsRod *r);  /* sum of rest lengths [m] */
 
 /* The material frame of edge j: tangent t, directors m1, m2 (each 3, any may be NULL). */
 void ns_rod_material_frame(const NsRod *r, int j, double *t, double *m1, double *m2);
@@ -148,8 +148,7 @@ void ns_rod_tip_frame(const NsRod *r, double *t, double *m1, double *m2);
 /* Energies at positions x ((nodes x 3); NULL = current) with the current twist angles, the
  * reference frames carried by parallel transport from ref_t to the edges of x [J]. Any output
  * may be NULL; returns the total. */
-double ns_rod_energy(const NsRod *r, const double *x, double *bend, double *twist,
-                     double *stretch);
+double ns_rod_energy(const NsRod *r, const double *x, double *bend, double *twist, double *stretch);
 
 /* Brings the reference frames to the current edges (parallel transport in time), updates the
  * reference twist and solves the quasi-static twist (theta_0 is held when the rod is held).
@@ -165,16 +164,18 @@ void ns_rod_forces(NsRod *r, const double *ext);
 /* One Newmark step of size dt [s]: applies the controls (sleeve motion, insertion, base twist),
  * assembles and solves (M - beta dt^2 K - gamma dt D) a' = F + K (dt v + dt^2 (1/2-beta) a)
  * + D dt (1-gamma) a (Eq. 4, 6), updates x, v, a, the frames and the twist, and reparameterizes
- * when params.auto_reparam. Returns 0, or -1 if the solve failed or produced a non-finite value
- * (the state is then as before the step, apart from the controls' rest-length and twist
- * increments, and stats say why). */
+ * when params.auto_reparam; more Newton iterations follow when the first one visibly stretched
+ * an edge (params.newton_max). Returns 0, or -1 when dt is not finite and positive or a control
+ * is not finite (nothing changes; stats.nan_count 1), when the solve failed or produced a
+ * non-finite value (the state, controls' increments included, is as before the step; stats say
+ * why), or when the reparameterization ran out of memory (the step itself has been taken). */
 int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats);
 
 /* Static equilibrium under ext (may be NULL) and gravity, held nodes fixed, velocities zeroed:
  * Newton steps with K (with the springs' exact geometric stiffness under compression, shifted
  * Levenberg-Marquardt style where that is not definite) and a backtracking line search on the
- * potential energy; the quasi-static twist is solved at every iterate. Stops when the largest free force
- * is below tol times the largest applied force (or reaction), or after max_iter iterations.
+ * potential energy; the quasi-static twist is solved at every iterate. Stops when the largest free
+ * force is below tol times the largest applied force (or reaction), or after max_iter iterations.
  * Returns the iterations used, or -1 on failure (non-finite values, no descent). */
 int ns_rod_static_solve(NsRod *r, const double *ext, double tol, int max_iter, NsRodStats *stats);
 
