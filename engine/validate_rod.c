@@ -56,6 +56,43 @@ static NsRodParams static_params(void)
     return p;
 }
 
+/* E I of the validation needle [N m^2] (all cases use the default material). */
+static double needle_bend_stiff(void)
+{
+    NsRodParams p = ns_default_rod_params();
+    const NsRodMaterial *m = &p.material;
+    double ro = 0.5 * m->outer_diameter, ri = 0.5 * m->inner_diameter;
+    return m->youngs * 0.25 * M_PI * (ro * ro * ro * ro - ri * ri * ri * ri);
+}
+
+/* Builds a needle (make_needle), turns its base by theta0, puts the tip load (3) on its last
+ * node and solves it statically to tol. On success (0) rod holds the result, for the caller to
+ * read and free, and *iters the Newton steps; on failure (-1) nothing is left to free. */
+static int loaded_needle(NsRod *rod, int edges, double R, double theta0, const double *load,
+                         double tol, int max_iter, int *iters, NsValidateResult *r)
+{
+    NsRodParams p = static_params();
+    if (make_needle(rod, edges, R, &p, r) != 0)
+        return -1;
+    int n = rod->nodes;
+    double *ext = calloc(3 * (size_t)n, sizeof *ext);
+    if (!ext) {
+        ns_rod_free(rod);
+        return fail(r, "out of memory");
+    }
+    memcpy(ext + 3 * (n - 1), load, 3 * sizeof *ext);
+    rod->theta[0] = theta0;
+    int it = ns_rod_static_solve(rod, ext, tol, max_iter, NULL);
+    free(ext);
+    if (it < 0) {
+        ns_rod_free(rod);
+        return fail(r, "static solve did not converge");
+    }
+    if (iters)
+        *iters = it;
+    return 0;
+}
+
 /* Elastica of a cantilever under a dead tip load perpendicular to its unloaded axis: with the
  * tangent angle th(s) from the axis, EI th'' = -P cos th, th(0) = 0, th'(L) = 0. Shooting on
  * th'(0) by bisection with classical RK4 (40,000 steps); returns the tip's transverse
@@ -100,37 +137,20 @@ static void elastica(double alpha, double *defl, double *shorten)
 static int cantilever(int edges, double P, double *dx, double *dz, int *iters, NsValidateResult *r)
 {
     NsRod rod;
-    NsRodParams p = static_params();
-    if (make_needle(&rod, edges, 0.0, &p, r) != 0)
+    double load[3] = {P, 0.0, 0.0};
+    if (loaded_needle(&rod, edges, 0.0, 0.0, load, 1e-7, 500, iters, r) != 0)
         return -1;
     int n = rod.nodes;
-    double *ext = calloc(3 * (size_t)n, sizeof *ext);
-    if (!ext) {
-        ns_rod_free(&rod);
-        return fail(r, "out of memory");
-    }
-    ext[3 * (n - 1)] = P;
-    NsRodStats st;
-    int it = ns_rod_static_solve(&rod, ext, 1e-7, 500, &st);
     *dx = rod.x[3 * (n - 1)];
     *dz = rod.x[3 * (n - 1) + 2] - ROD_L;
-    *iters = it;
-    free(ext);
     ns_rod_free(&rod);
-    if (it < 0)
-        return fail(r, "static solve did not converge");
     return 0;
 }
 
 static int rod_cantilever(NsValidateResult *r)
 {
     snprintf(r->metric, sizeof r->metric, "tip deflection / (P L^3 / 3EI) - 1");
-    NsRodParams p = static_params();
-    NsRod probe;
-    if (make_needle(&probe, 20, 0.0, &p, r) != 0)
-        return -1;
-    double EI = probe.bend_stiff;
-    ns_rod_free(&probe);
+    double EI = needle_bend_stiff();
     /* Small load: deflection 1e-4 L. */
     double Psmall = 1e-4 * ROD_L * 3.0 * EI / (ROD_L * ROD_L * ROD_L);
     double ref = Psmall * ROD_L * ROD_L * ROD_L / (3.0 * EI);
@@ -173,23 +193,11 @@ static int rod_cantilever(NsValidateResult *r)
 static int column(int edges, double P, double eps, double *defl, NsValidateResult *r)
 {
     NsRod rod;
-    NsRodParams p = static_params();
-    if (make_needle(&rod, edges, 0.0, &p, r) != 0)
+    double load[3] = {eps * P, 0.0, -P};
+    if (loaded_needle(&rod, edges, 0.0, 0.0, load, 1e-9, 2000, NULL, r) != 0)
         return -1;
-    int n = rod.nodes;
-    double *ext = calloc(3 * (size_t)n, sizeof *ext);
-    if (!ext) {
-        ns_rod_free(&rod);
-        return fail(r, "out of memory");
-    }
-    ext[3 * (n - 1)] = eps * P;
-    ext[3 * (n - 1) + 2] = -P;
-    int it = ns_rod_static_solve(&rod, ext, 1e-9, 2000, NULL);
-    *defl = rod.x[3 * (n - 1)];
-    free(ext);
+    *defl = rod.x[3 * (rod.nodes - 1)];
     ns_rod_free(&rod);
-    if (it < 0)
-        return fail(r, "static solve did not converge");
     return 0;
 }
 
@@ -198,35 +206,25 @@ static int column(int edges, double P, double eps, double *defl, NsValidateResul
 static int column_stable(int edges, double P, int *stable, NsValidateResult *r)
 {
     NsRod rod;
-    NsRodParams p = static_params();
-    if (make_needle(&rod, edges, 0.0, &p, r) != 0)
+    double load[3] = {0.0, 0.0, -P};
+    if (loaded_needle(&rod, edges, 0.0, 0.0, load, 1e-9, 100, NULL, r) != 0)
         return -1;
-    int n = rod.nodes;
-    double *ext = calloc(3 * (size_t)n, sizeof *ext);
+    double *ext = calloc(3 * (size_t)rod.nodes, sizeof *ext);
     if (!ext) {
         ns_rod_free(&rod);
         return fail(r, "out of memory");
     }
-    ext[3 * (n - 1) + 2] = -P;
-    int it = ns_rod_static_solve(&rod, ext, 1e-9, 100, NULL);
-    if (it >= 0)
-        *stable = ns_rod_is_stable(&rod, ext);
+    memcpy(ext + 3 * (rod.nodes - 1), load, sizeof load);
+    *stable = ns_rod_is_stable(&rod, ext);
     free(ext);
     ns_rod_free(&rod);
-    if (it < 0)
-        return fail(r, "axial static solve did not converge");
     return 0;
 }
 
 static int rod_buckling(NsValidateResult *r)
 {
     snprintf(r->metric, sizeof r->metric, "buckling load [N]");
-    NsRodParams p = static_params();
-    NsRod probe;
-    if (make_needle(&probe, 20, 0.0, &p, r) != 0)
-        return -1;
-    double EI = probe.bend_stiff;
-    ns_rod_free(&probe);
+    double EI = needle_bend_stiff();
     double Pcr = M_PI * M_PI * EI / (4.0 * ROD_L * ROD_L), eps = 1e-5;
     int edges = 20, stable;
     /* The buckling load: the smallest axial load under which the straight rod stops being a
@@ -409,29 +407,18 @@ static int rod_length(NsValidateResult *r)
 static int rod_reparam(NsValidateResult *r)
 {
     snprintf(r->metric, sizeof r->metric, "bending energy change (worst)");
-    NsRodParams p = static_params();
     NsRod rod;
     /* A needle curved at rest (radius 0.3 m towards +x), its base turned by 0.6 rad and its tip
      * loaded across the curvature plane: bending, twist and rest curvature all carried. */
-    if (make_needle(&rod, 20, 0.3, &p, r) != 0)
+    double load[3] = {0.0, 2.0 * needle_bend_stiff() / (ROD_L * ROD_L), 0.0};
+    int it;
+    if (loaded_needle(&rod, 20, 0.3, 0.6, load, 1e-9, 500, &it, r) != 0)
         return -1;
     int n = rod.nodes;
-    double *ext = calloc(3 * (size_t)n, sizeof *ext);
     double *x0 = malloc(3 * (size_t)n * sizeof *x0);
-    if (!ext || !x0) {
-        free(ext);
-        free(x0);
+    if (!x0) {
         ns_rod_free(&rod);
         return fail(r, "out of memory");
-    }
-    rod.theta[0] = 0.6;
-    ext[3 * (n - 1) + 1] = 2.0 * rod.bend_stiff / (ROD_L * ROD_L);
-    int it = ns_rod_static_solve(&rod, ext, 1e-9, 500, NULL);
-    free(ext);
-    if (it < 0) {
-        free(x0);
-        ns_rod_free(&rod);
-        return fail(r, "static solve did not converge");
     }
     memcpy(x0, rod.x, 3 * (size_t)n * sizeof *x0);
     double eb0, et0, L0 = ns_rod_rest_length(&rod);

@@ -234,10 +234,8 @@ int ns_rod_reparameterize(NsRod *r, NsRodStats *stats)
         pieces[j] = 1;
         if (j < first || !(r->rest_len[j] > split))
             continue;
-        while (r->rest_len[j] / pieces[j] > split)
+        while (r->rest_len[j] / pieces[j] > split) /* runs at least once: at least 2 pieces */
             pieces[j] *= 2;
-        if (pieces[j] == 1)
-            pieces[j] = 2;
         splits += pieces[j] - 1;
         m += pieces[j] - 1;
     }

@@ -1042,7 +1042,6 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
     st.force_ms = now_ms() - tf;
     double *rhs = r->work + 13 * (size_t)r->cap, *y = rhs + 3 * (size_t)r->cap;
     double *z = y + 3 * (size_t)r->cap, *anew = z + 3 * (size_t)r->cap;
-    uint8_t fixed[6] = {1, 1, 1, 1, 1, 1};
     int nf = 3 * r->held;
     if (r->steps == 0) /* consistent starting acceleration a0 = M^-1 F(x0, v0) */
         for (int i = nf; i < n3; i++)
@@ -1066,7 +1065,7 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
         anew[i] = (r->v_base[i % 3] - r->v[i] - dt * (1.0 - gamma) * r->a[i]) / (gamma * dt);
     uint8_t *dof_fixed = (uint8_t *)(anew + 3 * (size_t)r->cap);
     memset(dof_fixed, 0, 3 * (size_t)r->cap);
-    memcpy(dof_fixed, fixed, (size_t)nf);
+    memset(dof_fixed, 1, (size_t)nf);
     int rc = ns_banded_solve(&r->A, dof_fixed, rhs, anew, NULL);
     st.solve_ms = now_ms() - ts;
     int finite = rc == 0;
