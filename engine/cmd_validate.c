@@ -28,6 +28,7 @@ typedef struct CaseTable {
 static const CaseTable tables[] = {
     {ns_validate_fem_cases, &ns_validate_fem_case_count},
     {ns_validate_rod_cases, &ns_validate_rod_case_count},
+    {ns_validate_coupling_cases, &ns_validate_coupling_case_count},
 };
 #define TABLE_COUNT ((int)(sizeof tables / sizeof tables[0]))
 

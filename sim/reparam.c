@@ -232,7 +232,9 @@ int ns_rod_reparameterize(NsRod *r, NsRodStats *stats)
     int splits = 0, merges = 0, m = n;
     for (int j = 0; j < ne; j++) {
         pieces[j] = 1;
-        if (j < first || !(r->rest_len[j] > split))
+        /* An edge between two pinned nodes (inside the tissue: it lies along a tissue edge) is
+         * never split. */
+        if (j < first || !(r->rest_len[j] > split) || (r->pinned[j] && r->pinned[j + 1]))
             continue;
         while (r->rest_len[j] / pieces[j] > split) /* runs at least once: at least 2 pieces */
             pieces[j] *= 2;

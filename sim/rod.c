@@ -1015,38 +1015,36 @@ static void apply_controls(NsRod *r, double dt, NsRodStats *st)
     }
 }
 
-int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
+int ns_rod_begin_step(NsRod *r, double dt, const double *ext, NsRodSystem *sys, NsRodStats *st)
 {
-    NsRodStats st;
-    memset(&st, 0, sizeof st);
-    double t0 = now_ms();
     int n = r->nodes, n3 = 3 * n, ne = n - 1;
     double beta = r->params.beta, gamma = r->params.gamma;
     if (!(dt > 0.0) || !isfinite(dt) || !isfinite(r->v_insert) || !isfinite(r->twist_rate) ||
         !isfinite(r->v_base[0]) || !isfinite(r->v_base[1]) || !isfinite(r->v_base[2])) {
-        st.nan_count++; /* a bad time step or control: refused, nothing changes */
-        if (stats)
-            *stats = st;
+        st->nan_count++; /* a bad time step or control: refused, nothing changes */
         return -1;
     }
     /* What the step may change before it can fail, kept to undo it: the strains and the rest
      * length of edge 1 (insertion), the twist angles (base rotation), a (the first step). */
     double *eps0 = r->work + 35 * (size_t)r->cap, *theta0 = eps0 + r->cap;
-    double *asave = theta0 + r->cap, len1 = ne > 1 ? r->rest_len[1] : 0.0;
+    double *asave = theta0 + r->cap;
+    r->undo_len1 = ne > 1 ? r->rest_len[1] : 0.0;
     edge_strains(r, eps0);
     memcpy(theta0, r->theta, (size_t)ne * sizeof *theta0);
     memcpy(asave, r->a, (size_t)n3 * sizeof *asave);
-    apply_controls(r, dt, &st);
     double tf = now_ms();
-    ns_rod_forces(r, ext);
-    st.force_ms = now_ms() - tf;
-    double *rhs = r->work + 13 * (size_t)r->cap, *y = rhs + 3 * (size_t)r->cap;
-    double *z = y + 3 * (size_t)r->cap, *anew = z + 3 * (size_t)r->cap;
     int nf = 3 * r->held;
-    if (r->steps == 0) /* consistent starting acceleration a0 = M^-1 F(x0, v0) */
+    if (r->steps == 0) { /* consistent starting acceleration a0 = M^-1 F(x0, v0), before the
+                            controls act */
+        ns_rod_forces(r, ext);
         for (int i = nf; i < n3; i++)
             r->a[i] = r->force[i] / r->mass[i / 3];
-    double ts = now_ms();
+    }
+    apply_controls(r, dt, st);
+    ns_rod_forces(r, ext);
+    st->force_ms += now_ms() - tf;
+    double *rhs = r->work + 13 * (size_t)r->cap, *y = rhs + 3 * (size_t)r->cap;
+    double *z = y + 3 * (size_t)r->cap, *anew = z + 3 * (size_t)r->cap;
     build_system(r, 1.0, beta * dt * dt, gamma * dt);
     for (int i = 0; i < n3; i++) {
         y[i] = dt * r->v[i] + dt * dt * (0.5 - beta) * r->a[i];
@@ -1056,36 +1054,44 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
         y[i] = z[i] = 0.0;
     ns_banded_mul(&r->K, y, rhs);
     ns_banded_mul(&r->D, z, y);
-    for (int i = 0; i < n3; i++)
+    for (int i = 0; i < n3; i++) {
         rhs[i] += y[i] + r->force[i];
+        anew[i] = r->a[i];
+    }
     for (int i = n3; i < 3 * r->cap; i++)
         rhs[i] = anew[i] = 0.0;
     /* Held nodes move with the sleeve: their acceleration brings v to v_base this step. */
     for (int i = 0; i < nf; i++)
         anew[i] = (r->v_base[i % 3] - r->v[i] - dt * (1.0 - gamma) * r->a[i]) / (gamma * dt);
     uint8_t *dof_fixed = (uint8_t *)(anew + 3 * (size_t)r->cap);
-    memset(dof_fixed, 0, 3 * (size_t)r->cap);
-    memset(dof_fixed, 1, (size_t)nf);
-    int rc = ns_banded_solve(&r->A, dof_fixed, rhs, anew, NULL);
-    st.solve_ms = now_ms() - ts;
-    int finite = rc == 0;
-    for (int i = 0; i < n3 && finite; i++)
-        finite = isfinite(anew[i]);
-    if (!finite) {
-        st.solve_failed += rc != 0;
-        st.nan_count += rc == 0;
-        if (ne > 1)
-            r->rest_len[1] = len1;
-        memcpy(r->theta, theta0, (size_t)ne * sizeof *theta0);
-        memcpy(r->a, asave, (size_t)n3 * sizeof *asave);
-        rod_masses(r);
-        st.total_ms = now_ms() - t0;
-        if (stats)
-            *stats = st;
-        return -1;
-    }
-    /* x, v from the new accelerations (Eq. 1, 2), keeping the start of the step for the further
-     * Newton iterations below. */
+    memset(dof_fixed, 1, 3 * (size_t)r->cap);
+    memset(dof_fixed + nf, 0, (size_t)(n3 - nf));
+    sys->A = &r->A;
+    sys->rhs = rhs;
+    sys->anew = anew;
+    sys->dof_fixed = dof_fixed;
+    sys->n3 = 3 * r->cap;
+    return 0;
+}
+
+void ns_rod_abort_step(NsRod *r)
+{
+    int n = r->nodes, ne = n - 1;
+    double *eps0 = r->work + 35 * (size_t)r->cap, *theta0 = eps0 + r->cap;
+    double *asave = theta0 + r->cap;
+    if (ne > 1)
+        r->rest_len[1] = r->undo_len1;
+    memcpy(r->theta, theta0, (size_t)ne * sizeof *theta0);
+    memcpy(r->a, asave, (size_t)(3 * n) * sizeof *asave);
+    rod_masses(r);
+}
+
+void ns_rod_end_step(NsRod *r, double dt, const double *anew, NsRodStats *st)
+{
+    int n3 = 3 * r->nodes;
+    double beta = r->params.beta, gamma = r->params.gamma;
+    /* x, v from the new accelerations (Eq. 1, 2), keeping the start of the step for further
+     * Newton iterations. */
     double *x0 = r->work + 26 * (size_t)r->cap, *v0 = x0 + 3 * (size_t)r->cap;
     double *a0 = v0 + 3 * (size_t)r->cap;
     memcpy(x0, r->x, (size_t)n3 * sizeof *x0);
@@ -1096,8 +1102,44 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
         r->v[i] = v0[i] + dt * ((1.0 - gamma) * a0[i] + gamma * anew[i]);
         r->a[i] = anew[i];
     }
-    ns_rod_update_frames(r, &st);
-    st.newton_iterations = 1;
+    ns_rod_update_frames(r, st);
+    st->newton_iterations = 1;
+    r->steps++;
+}
+
+int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
+{
+    NsRodStats st;
+    memset(&st, 0, sizeof st);
+    double t0 = now_ms();
+    int n3 = 3 * r->nodes, nf = 3 * r->held;
+    double beta = r->params.beta, gamma = r->params.gamma;
+    NsRodSystem sys;
+    if (ns_rod_begin_step(r, dt, ext, &sys, &st)) {
+        if (stats)
+            *stats = st;
+        return -1;
+    }
+    double ts = now_ms();
+    double *rhs = sys.rhs, *anew = sys.anew, *y = rhs + 3 * (size_t)r->cap;
+    const uint8_t *dof_fixed = sys.dof_fixed;
+    int rc = ns_banded_solve(&r->A, dof_fixed, rhs, anew, NULL);
+    st.solve_ms = now_ms() - ts;
+    int finite = rc == 0;
+    for (int i = 0; i < n3 && finite; i++)
+        finite = isfinite(anew[i]);
+    if (!finite) {
+        st.solve_failed += rc != 0;
+        st.nan_count += rc == 0;
+        ns_rod_abort_step(r);
+        st.total_ms = now_ms() - t0;
+        if (stats)
+            *stats = st;
+        return -1;
+    }
+    ns_rod_end_step(r, dt, anew, &st);
+    double *x0 = r->work + 26 * (size_t)r->cap, *v0 = x0 + 3 * (size_t)r->cap;
+    double *a0 = v0 + 3 * (size_t)r->cap, *eps0 = r->work + 35 * (size_t)r->cap;
     /* The paper takes one Newton step (Eq. 4). When that step moved the rod so far that its
      * linearization stretched edges by more than newton_strain_tol (a large load or time step
      * on the free needle), iterate: residual R = F(x, v) - M a at the current iterate, the same
@@ -1125,7 +1167,6 @@ int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats)
         ns_rod_update_frames(r, &st);
         st.newton_iterations++;
     }
-    r->steps++;
     if (r->params.auto_reparam && ns_rod_reparameterize(r, &st) != 0) {
         st.total_ms = now_ms() - t0;
         if (stats)

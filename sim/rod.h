@@ -118,6 +118,7 @@ typedef struct NsRod {
     NsBanded K, D, A; /* dF/dx [N/m], dF/dv [N s/m], the Newmark system matrix */
     double *work;     /* scratch */
     uint64_t steps;
+    double undo_len1; /* edge 1's rest length before the step's insertion (abort_step) */
 } NsRod;
 
 /* Creates a rod through the n points x (n x 3), at rest in that shape: the rest lengths are the
@@ -171,6 +172,24 @@ void ns_rod_forces(NsRod *r, const double *ext);
  * why), or when the reparameterization ran out of memory (the step itself has been taken). */
 int ns_rod_step(NsRod *r, double dt, const double *ext, NsRodStats *stats);
 
+/* The step in parts, for a caller that solves the rod's system together with something else
+ * (the needle-tissue coupling, sim/coupling.h). begin_step refuses a bad dt or control like
+ * ns_rod_step (-1, nothing changed), else applies the controls, evaluates the forces and
+ * assembles A a' = rhs: sys->anew holds the held nodes' prescribed accelerations and, on free DOFs,
+ * the current a (a warm start); DOFs marked in sys->dof_fixed (held nodes and unused slots) keep
+ * their anew values. Vectors are sys->n3 = 3 cap long. The caller then either ends the step with
+ * its solution (end_step: Newmark update of x and v, frames and twist; no extra Newton iterations,
+ * no reparameterization) or aborts it (abort_step: undoes the controls' increments and a). */
+typedef struct NsRodSystem {
+    const NsBanded *A;
+    double *rhs, *anew;
+    const uint8_t *dof_fixed;
+    int n3;
+} NsRodSystem;
+int ns_rod_begin_step(NsRod *r, double dt, const double *ext, NsRodSystem *sys, NsRodStats *st);
+void ns_rod_end_step(NsRod *r, double dt, const double *anew, NsRodStats *st);
+void ns_rod_abort_step(NsRod *r);
+
 /* Static equilibrium under ext (may be NULL) and gravity, held nodes fixed, velocities zeroed:
  * Newton steps with K (with the springs' exact geometric stiffness under compression, shifted
  * Levenberg-Marquardt style where that is not definite) and a backtracking line search on the
@@ -198,10 +217,10 @@ uint64_t ns_rod_state_hash(const NsRod *r);
  * from edge 0 (kept as it was). Returns 0, or -1 on bad input or memory (rod unchanged). */
 int ns_rod_resample(NsRod *r, const double *xn, const double *s, int m);
 
-/* Splits free edges longer than split_factor x max_rest_edge at the midpoint of an
- * interpolating cubic, and merges edges shorter than merge_factor x min_rest_edge by removing a
- * node that is neither held, pinned nor the tip. Existing nodes keep their positions. Adds the
- * counts into stats (may be NULL). Returns 0, or -1 on memory. */
+/* Splits free edges (not between two pinned nodes) longer than split_factor x max_rest_edge at the
+ * midpoint of an interpolating cubic, and merges edges shorter than merge_factor x min_rest_edge by
+ * removing a node that is neither held, pinned nor the tip. Existing nodes keep their positions.
+ * Adds the counts into stats (may be NULL). Returns 0, or -1 on memory. */
 int ns_rod_reparameterize(NsRod *r, NsRodStats *stats);
 
 #endif

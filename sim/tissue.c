@@ -588,6 +588,44 @@ static void build_system(NsTissue *t, double c1, double c2)
     }
 }
 
+double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissueStats *st)
+{
+    NsMesh *M = &t->mesh;
+    int n3 = 3 * M->node_slots;
+    double beta = t->params.beta, gamma = t->params.gamma;
+    ns_tissue_forces(t, 0, st);
+    if (t->steps == 0) {
+        /* Newmark needs a consistent starting acceleration a0 = M^-1 F(x0, v0) (lumped M);
+         * starting from a0 = 0 in a loaded state puts a one-off error into the energy. */
+        for (int i = 0; i < n3; i++)
+            M->a[i] = t->dof_fixed[i] ? 0.0 : (t->force[i] + (ext ? ext[i] : 0.0)) / t->mass[i / 3];
+    }
+    build_system(t, beta * dt * dt, gamma * dt);
+    double *rhs = t->work, *y = rhs + n3, *z = y + n3;
+    for (int i = 0; i < n3; i++) {
+        y[i] = dt * M->v[i] + dt * dt * (0.5 - beta) * M->a[i];
+        z[i] = dt * (1.0 - gamma) * M->a[i];
+    }
+    ns_bsm_mul(&t->K, y, rhs);
+    ns_bsm_mul(&t->D, z, y);
+    for (int i = 0; i < n3; i++)
+        rhs[i] += y[i] + t->force[i] + (ext ? ext[i] : 0.0);
+    return rhs;
+}
+
+void ns_tissue_end_step(NsTissue *t, double dt, const double *anew)
+{
+    NsMesh *M = &t->mesh;
+    int n3 = 3 * M->node_slots;
+    double beta = t->params.beta, gamma = t->params.gamma;
+    for (int i = 0; i < n3; i++) {
+        M->x[i] += dt * M->v[i] + dt * dt * ((0.5 - beta) * M->a[i] + beta * anew[i]);
+        M->v[i] += dt * ((1.0 - gamma) * M->a[i] + gamma * anew[i]);
+        M->a[i] = anew[i];
+    }
+    t->steps++;
+}
+
 int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
                    NsTissueStats *stats)
 {
@@ -596,27 +634,11 @@ int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
     double t0 = now_ms();
     NsMesh *M = &t->mesh;
     int n3 = 3 * M->node_slots;
-    double beta = t->params.beta, gamma = t->params.gamma;
-    ns_tissue_forces(t, 0, &st);
-    if (t->steps == 0) {
-        /* Newmark needs a consistent starting acceleration a0 = M^-1 F(x0, v0) (lumped M);
-         * starting from a0 = 0 in a loaded state puts a one-off error into the energy. */
-        for (int i = 0; i < n3; i++)
-            M->a[i] = t->dof_fixed[i] ? 0.0 : (t->force[i] + (ext ? ext[i] : 0.0)) / t->mass[i / 3];
-    }
+    double *rhs = ns_tissue_begin_step(t, dt, ext, &st);
     double ts = now_ms();
-    build_system(t, beta * dt * dt, gamma * dt);
-    double *rhs = t->work, *y = rhs + n3, *z = y + n3, *anew = z + n3;
-    for (int i = 0; i < n3; i++) {
-        y[i] = dt * M->v[i] + dt * dt * (0.5 - beta) * M->a[i];
-        z[i] = dt * (1.0 - gamma) * M->a[i];
-    }
-    ns_bsm_mul(&t->K, y, rhs);
-    ns_bsm_mul(&t->D, z, y);
-    for (int i = 0; i < n3; i++) {
-        rhs[i] += y[i] + t->force[i] + (ext ? ext[i] : 0.0);
+    double *anew = rhs + 3 * n3;
+    for (int i = 0; i < n3; i++)
         anew[i] = t->dof_fixed[i] ? 0.0 : M->a[i]; /* warm start; fixed DOFs do not accelerate */
-    }
     NsSolveStats ss;
     int rc = ns_solver_solve(solver, &t->A, t->dof_fixed, rhs, anew, t->params.solve_tol,
                              t->params.solve_max_iter, &ss);
@@ -635,12 +657,7 @@ int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
             *stats = st;
         return -1;
     }
-    for (int i = 0; i < n3; i++) {
-        M->x[i] += dt * M->v[i] + dt * dt * ((0.5 - beta) * M->a[i] + beta * anew[i]);
-        M->v[i] += dt * ((1.0 - gamma) * M->a[i] + gamma * anew[i]);
-        M->a[i] = anew[i];
-    }
-    t->steps++;
+    ns_tissue_end_step(t, dt, anew);
     st.total_ms = now_ms() - t0;
     if (stats)
         *stats = st;

@@ -119,6 +119,13 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats);
 int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
                    NsTissueStats *stats);
 
+/* The step in parts, for a caller that solves the tissue together with the needle
+ * (sim/coupling.h): begin_step evaluates the forces (into stats), assembles t->A and returns
+ * the right-hand side (3 node_slots, in t->work; the next 3 x 3 node_slots of t->work are free
+ * scratch for the caller); end_step applies the Newmark update with the accelerations anew. */
+double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissueStats *st);
+void ns_tissue_end_step(NsTissue *t, double dt, const double *anew);
+
 /* Static equilibrium by Newton's method on the free DOFs (fixed DOFs keep their x): stops when
  * the free residual force is below tol times the largest applied or reaction force, or after
  * max_newton iterations. ext as above. Returns the number of iterations, or -1. */

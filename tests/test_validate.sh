@@ -23,7 +23,7 @@ fail() {
 }
 
 CASES="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy
-rod-cantilever rod-buckling rod-twist rod-length rod-reparam"
+rod-cantilever rod-buckling rod-twist rod-length rod-reparam friction-stick friction-slip"
 
 # The whole suite, as JSON.
 "$BIN" validate --json >"$TMP/out.json" 2>"$TMP/err"

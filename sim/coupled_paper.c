@@ -1,0 +1,187 @@
+/* The paper's linear solver for the coupled system (§3.6.1-3.6.2): conjugate gradients directly
+ * on the symmetric indefinite system Eq. 7,
+ *
+ *   [ A_t   0     W_t R' ] [ a_t ]   [ b_t - W_t g ]
+ *   [ 0     A_n  -W_n R' ] [ a_n ] = [ b_n + W_n g ]
+ *   [ (W_t R')^T -(W_n R')^T  Z ] [ c ]   [ e ]
+ *
+ * where R' is the local frames with the tangent column zeroed at DYNAMIC nodes, Z is 1 on those
+ * tangents' rows and 0 elsewhere, and g the known dynamic friction (on the needle). The tissue
+ * and needle blocks are multiplied as stored (block CSR and band); the constraint rows and
+ * columns are applied node by node, never assembled, so a new friction configuration changes no
+ * matrix. The solve is warm-started from the previous trial's solution. Fixed DOFs (tissue
+ * Dirichlet nodes, the needle's held nodes) keep their values.
+ *
+ * Scaling: the constraint unknowns are c = kappa c' and the constraint rows are multiplied by
+ * kappa, the mean diagonal of A_t at the coupled nodes, which keeps the matrix symmetric and its
+ * blocks of one magnitude (in SI units the tissue's diagonal is ~1e-2 and the constraint
+ * entries 1; unscaled, CG stalls). The paper does not say how it scaled; its units differ. */
+#include "coupling_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Columns of R' for node k in state s: the tangent dropped when DYNAMIC. */
+static int col_active(int s, int col)
+{
+    return col > 0 || s == NS_FRICTION_STATIC;
+}
+
+static void apply(const CoupledSystem *S, double kappa, const double *z, double *out)
+{
+    const double *zt = z, *zr = z + S->nt3, *zc = zr + S->nr3;
+    double *ot = out, *orr = out + S->nt3, *oc = orr + S->nr3;
+    ns_bsm_mul_threads(S->At, zt, ot, S->threads);
+    ns_banded_mul(S->Ar, zr, orr);
+    for (int k = 0; k < S->q; k++) {
+        const double *R = S->R + 9 * k;
+        double g[3] = {0, 0, 0}, pt[3];
+        for (int col = 0; col < 3; col++)
+            if (col_active(S->st[k], col))
+                for (int i = 0; i < 3; i++)
+                    g[i] += R[3 * col + i] * kappa * zc[3 * k + col];
+        double w = S->tw[k];
+        for (int i = 0; i < 3; i++) {
+            ot[3 * S->ta[k] + i] += (1.0 - w) * g[i];
+            ot[3 * S->tb[k] + i] += w * g[i];
+            orr[3 * S->idx[k] + i] -= g[i];
+        }
+        coupled_point(S, k, zt, pt);
+        for (int i = 0; i < 3; i++)
+            pt[i] -= zr[3 * S->idx[k] + i];
+        for (int col = 0; col < 3; col++)
+            oc[3 * k + col] =
+                col_active(S->st[k], col)
+                    ? kappa * (R[3 * col] * pt[0] + R[3 * col + 1] * pt[1] + R[3 * col + 2] * pt[2])
+                    : zc[3 * k + col]; /* Z's 1 */
+    }
+}
+
+static int is_fixed(const CoupledSystem *S, int i)
+{
+    if (i < S->nt3)
+        return S->tfixed[i];
+    if (i < S->nt3 + S->nr3)
+        return S->rfixed[i - S->nt3];
+    return 0;
+}
+
+static double dot(const double *a, const double *b, int n)
+{
+    double s = 0.0;
+    for (int i = 0; i < n; i++)
+        s += a[i] * b[i];
+    return s;
+}
+
+int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterations)
+{
+    int n = S->nt3 + S->nr3 + 3 * S->q;
+    double *buf = malloc((size_t)n * 7 * sizeof *buf);
+    if (!buf)
+        return -1;
+    double *x = buf, *b = x + n, *r = b + n, *p = r + n, *qv = p + n, *sc = qv + n, *tmp = sc + n;
+    /* Units: every unknown scaled so that the tissue and needle blocks have a unit diagonal,
+     * the constraint forces by sqrt(kappa), kappa the mean diagonal of A_t at the coupled nodes
+     * (see the top of the file). */
+    double kappa = 0.0;
+    for (int k = 0; k < S->q; k++) {
+        const double *blk = ns_bsm_find(S->At, S->ta[k], S->ta[k]);
+        kappa += blk ? (blk[0] + blk[4] + blk[8]) / 3.0 : 1.0;
+    }
+    kappa = S->q > 0 ? kappa / S->q : 1.0;
+    for (int i = 0; i < S->nt3; i++) {
+        const double *blk = ns_bsm_find(S->At, i / 3, i / 3);
+        sc[i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
+    }
+    for (int i = 0; i < S->nr3; i++) {
+        const double *blk = ns_banded_block((NsBanded *)S->Ar, i / 3, i / 3);
+        sc[S->nt3 + i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
+    }
+    for (int i = S->nt3 + S->nr3; i < n; i++)
+        sc[i] = sqrt(kappa);
+    /* Right-hand side with the known dynamic friction, and the starting point. */
+    memcpy(b, S->bt, (size_t)S->nt3 * sizeof *b);
+    memcpy(b + S->nt3, S->br, (size_t)S->nr3 * sizeof *b);
+    memcpy(x, S->at, (size_t)S->nt3 * sizeof *x);
+    memcpy(x + S->nt3, S->ar, (size_t)S->nr3 * sizeof *x);
+    double *bc = b + S->nt3 + S->nr3, *xc = x + S->nt3 + S->nr3;
+    for (int k = 0; k < S->q; k++) {
+        double gk = coupled_known_force(S, k, S->st[k]), w = S->tw[k];
+        const double *t = S->R + 9 * k;
+        for (int i = 0; i < 3; i++) {
+            b[3 * S->ta[k] + i] -= (1.0 - w) * gk * t[i];
+            b[3 * S->tb[k] + i] -= w * gk * t[i];
+            b[S->nt3 + 3 * S->idx[k] + i] += gk * t[i];
+        }
+        for (int col = 0; col < 3; col++) {
+            int act = col_active(S->st[k], col);
+            bc[3 * k + col] = act ? S->e[3 * k + col] : 0.0;
+            xc[3 * k + col] = act ? S->cf[3 * k + col] : 0.0;
+        }
+    }
+    /* The scaled system: x = sc x', b' = sc b, A' = sc A sc. */
+    for (int i = 0; i < n; i++) {
+        x[i] /= sc[i];
+        b[i] *= sc[i];
+    }
+#define APPLY(in, out)                                                                             \
+    do {                                                                                           \
+        for (int i_ = 0; i_ < n; i_++)                                                             \
+            tmp[i_] = sc[i_] * (in)[i_];                                                           \
+        apply(S, 1.0, tmp, out);                                                                   \
+        for (int i_ = 0; i_ < n; i_++)                                                             \
+            (out)[i_] *= sc[i_];                                                                   \
+    } while (0)
+    /* r = b - A x on free DOFs; the reference norm is that of b - A x_fixed. */
+    for (int i = 0; i < n; i++)
+        p[i] = is_fixed(S, i) ? x[i] : 0.0;
+    APPLY(p, qv);
+    double bnorm = 0.0;
+    for (int i = 0; i < n; i++)
+        if (!is_fixed(S, i))
+            bnorm += (b[i] - qv[i]) * (b[i] - qv[i]);
+    bnorm = sqrt(bnorm);
+    APPLY(x, qv);
+    for (int i = 0; i < n; i++)
+        r[i] = is_fixed(S, i) ? 0.0 : b[i] - qv[i];
+    double rr = dot(r, r, n);
+    int it = 0;
+    if (bnorm > 0.0) {
+        memcpy(p, r, (size_t)n * sizeof *p);
+        while (sqrt(rr) > tol * bnorm && it < max_iter) {
+            APPLY(p, qv);
+            for (int i = 0; i < n; i++)
+                if (is_fixed(S, i))
+                    qv[i] = 0.0;
+            double pq = dot(p, qv, n);
+            if (pq == 0.0 || !isfinite(pq))
+                break; /* breakdown of CG on the indefinite system */
+            double alpha = rr / pq;
+            for (int i = 0; i < n; i++) {
+                x[i] += alpha * p[i];
+                r[i] -= alpha * qv[i];
+            }
+            double rr2 = dot(r, r, n);
+            double beta = rr2 / rr;
+            rr = rr2;
+            for (int i = 0; i < n; i++)
+                p[i] = r[i] + beta * p[i];
+            it++;
+        }
+    }
+#undef APPLY
+    *iterations += it;
+    S->converged = bnorm == 0.0 || sqrt(rr) <= tol * bnorm;
+    for (int i = 0; i < n; i++)
+        x[i] *= sc[i];
+    memcpy(S->at, x, (size_t)S->nt3 * sizeof *x);
+    memcpy(S->ar, x + S->nt3, (size_t)S->nr3 * sizeof *x);
+    for (int k = 0; k < S->q; k++)
+        for (int col = 0; col < 3; col++)
+            S->cf[3 * k + col] =
+                col_active(S->st[k], col) ? xc[3 * k + col] : coupled_known_force(S, k, S->st[k]);
+    free(buf);
+    return 0;
+}

@@ -1,0 +1,754 @@
+/* Needle-tissue coupling (sim/coupling.h): the coupled step of Algorithm 1 (without remeshing),
+ * the friction model of §3.3 (Eq. 7-11), Algorithm 3's state search for the paper's solver, and
+ * the needle reparameterization of §3.4.2 after each step. */
+#include "coupling.h"
+#include "coupling_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return 1e3 * (double)ts.tv_sec + 1e-6 * (double)ts.tv_nsec;
+}
+
+static double dot3(const double *a, const double *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+static double norm3(const double *a)
+{
+    return sqrt(dot3(a, a));
+}
+
+NsCouplingParams ns_default_coupling_params(void)
+{
+    NsCouplingParams p;
+    memset(&p, 0, sizeof p);
+    p.f_perlen = 10.0; /* N/m: needle-tissue friction of soft tissue, order of Crouch 2005 */
+    p.eta = 0.0;
+    /* §3.6.1 used 1e-3 and 1e-5 in its own units. Here the residual is that of the system scaled
+     * to a unit diagonal (coupled_paper.c); at 1e-3 / 1e-5 the friction checks flip on solver
+     * error (ten-trial failures, a needle that ran away in friction-stick), at 1e-6 / 1e-8 they
+     * do not (docs/solvers.md). */
+    p.tau_check = 1e-6;
+    p.tau_sol = 1e-8;
+    p.max_trials = 10;
+    p.max_iter = 5000;
+    p.solver = NS_COUPLED_PAPER;
+    p.threads = 1;
+    return p;
+}
+
+static int reserve(NsCoupled *c, int cap)
+{
+    if (cap <= c->cap)
+        return 0;
+    int *ta = realloc(c->ta, (size_t)cap * sizeof *ta);
+    if (ta)
+        c->ta = ta;
+    int *tb = realloc(c->tb, (size_t)cap * sizeof *tb);
+    if (tb)
+        c->tb = tb;
+    double *tw = realloc(c->tw, (size_t)cap * sizeof *tw);
+    if (tw)
+        c->tw = tw;
+    uint8_t *st = realloc(c->state, (size_t)cap);
+    if (st)
+        c->state = st;
+    if (!ta || !tb || !tw || !st)
+        return -1;
+    for (int i = c->cap; i < cap; i++) {
+        c->ta[i] = c->tb[i] = -1;
+        c->tw[i] = 0.0;
+        c->state[i] = NS_FRICTION_FREE;
+    }
+    c->cap = cap;
+    return 0;
+}
+
+static double *scratch(NsCoupled *c, size_t n)
+{
+    if (n > c->work_cap) {
+        double *w = realloc(c->work, n * sizeof *w);
+        if (!w)
+            return NULL;
+        c->work = w;
+        c->work_cap = n;
+    }
+    return c->work;
+}
+
+/* Sets the coupling of the rod's nodes from the path: nodes first .. first+behind-1 at path
+ * nodes, then the tip on its edge (unless through); others FREE. Keeps states of nodes that stay
+ * coupled when keep_state, else STATIC. */
+static void couple_from_path(NsCoupled *c, int first, int keep_state)
+{
+    NsRod *r = c->rod;
+    const NsNeedlePath *p = &c->path;
+    int nb = ns_needle_path_behind(p);
+    for (int i = 0; i < r->nodes; i++) {
+        int k = i - first;
+        uint8_t old = c->state[i];
+        c->ta[i] = c->tb[i] = -1;
+        c->tw[i] = 0.0;
+        r->pinned[i] = 0;
+        if (k >= 0 && k < nb) {
+            c->ta[i] = c->tb[i] = p->node[k];
+        } else if (k == nb && i == r->nodes - 1 && !p->through) {
+            double w;
+            int e = ns_needle_path_tip(p, &w);
+            c->ta[i] = p->node[e];
+            c->tb[i] = p->node[e + 1];
+            c->tw[i] = w;
+        }
+        if (c->ta[i] >= 0) {
+            r->pinned[i] = 1;
+            c->state[i] = keep_state && old != NS_FRICTION_FREE ? old : NS_FRICTION_STATIC;
+        } else {
+            c->state[i] = NS_FRICTION_FREE;
+        }
+    }
+}
+
+static void tissue_point(const NsCoupled *c, int i, const double *v, double *out)
+{
+    const double *a = v + 3 * c->ta[i], *b = v + 3 * c->tb[i];
+    for (int k = 0; k < 3; k++)
+        out[k] = (1.0 - c->tw[i]) * a[k] + c->tw[i] * b[k];
+}
+
+int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *path,
+                    const NsCouplingParams *params, char *err, int err_sz)
+{
+    memset(c, 0, sizeof *c);
+    c->tissue = tissue;
+    c->rod = rod;
+    c->params = params ? *params : ns_default_coupling_params();
+    const NsCouplingParams *q = &c->params;
+    if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
+        !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
+        q->solver != NS_COUPLED_PAPER) {
+        snprintf(err, (size_t)err_sz,
+                 "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
+                 "max_trials and max_iter >= 1, solver paper (the only one yet)");
+        *path = (NsNeedlePath){0};
+        return -1;
+    }
+    c->path = *path;
+    *path = (NsNeedlePath){0};
+    if (reserve(c, rod->cap)) {
+        snprintf(err, (size_t)err_sz, "coupling: out of memory");
+        ns_coupled_free(c);
+        return -1;
+    }
+    /* Find the rod node at the path's entry, and check the rest against the path. */
+    const NsMesh *M = &tissue->mesh;
+    int first = -1;
+    for (int i = rod->held; i < rod->nodes && first < 0; i++) {
+        double d[3];
+        for (int k = 0; k < 3; k++)
+            d[k] = rod->x[3 * i + k] - M->x[3 * c->path.node[0] + k];
+        if (norm3(d) < 1e-9)
+            first = i;
+    }
+    if (first < 0) {
+        snprintf(err, (size_t)err_sz, "coupling: no needle node at the path's entry (node %d)",
+                 c->path.node[0]);
+        ns_coupled_free(c);
+        return -1;
+    }
+    couple_from_path(c, first, 0);
+    for (int i = 0; i < rod->nodes; i++) {
+        if (c->ta[i] < 0)
+            continue;
+        double xp[3], d[3];
+        tissue_point(c, i, M->x, xp);
+        for (int k = 0; k < 3; k++)
+            d[k] = rod->x[3 * i + k] - xp[k];
+        if (norm3(d) > 1e-9) {
+            snprintf(err, (size_t)err_sz,
+                     "coupling: needle node %d is %.3g m from its tissue point (path node %d)", i,
+                     norm3(d), i - first);
+            ns_coupled_free(c);
+            return -1;
+        }
+    }
+    if (!c->path.through && c->ta[rod->nodes - 1] < 0) {
+        snprintf(err, (size_t)err_sz, "coupling: the needle's tip is not on the path");
+        ns_coupled_free(c);
+        return -1;
+    }
+    return 0;
+}
+
+void ns_coupled_free(NsCoupled *c)
+{
+    ns_needle_path_free(&c->path);
+    free(c->ta);
+    free(c->tb);
+    free(c->tw);
+    free(c->state);
+    free(c->work);
+    memset(c, 0, sizeof *c);
+}
+
+/* ---- the pieces of Eq. 7-11 shared by both solvers ---- */
+
+void coupled_point(const CoupledSystem *S, int k, const double *v, double *out)
+{
+    const double *a = v + 3 * S->ta[k], *b = v + 3 * S->tb[k];
+    for (int i = 0; i < 3; i++)
+        out[i] = (1.0 - S->tw[k]) * a[i] + S->tw[k] * b[i];
+}
+
+double coupled_known_force(const CoupledSystem *S, int k, int s)
+{
+    if (s == NS_FRICTION_DYN_POS)
+        return -(S->f[k] + (k == S->tip ? S->f_cut : 0.0)); /* the tip cuts: Eq. 10's f_cut */
+    if (s == NS_FRICTION_DYN_NEG)
+        return S->f[k];
+    return 0.0;
+}
+
+double coupled_rel_slide(const CoupledSystem *S, int k, const double *at, const double *ar)
+{
+    double ah[3];
+    coupled_point(S, k, at, ah);
+    const double *an = ar + 3 * S->idx[k], *t = S->R + 9 * k;
+    double d = 0.0;
+    for (int i = 0; i < 3; i++)
+        d += t[i] * (S->yrel[3 * k + i] + S->bdt2 * (ah[i] - an[i]));
+    return d;
+}
+
+/* Slack of the checks: forces within 1e-6 of the threshold, slides of 1e-10 m, count as met
+ * (the solves are iterative; a node exactly at its threshold must not flip back and forth). */
+#define FORCE_SLACK 1e-3
+#define SLIDE_SLACK 1e-9
+
+int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, const double *at,
+                  const double *ar, uint8_t *next)
+{
+    int bad = 0;
+    for (int k = 0; k < S->q; k++) {
+        next[k] = st[k];
+        if (st[k] == NS_FRICTION_STATIC) {
+            /* Eq. 9 / 10: the tangential force on the needle within the static threshold (the
+             * tip also holds back up to f_cut before it cuts). */
+            double c1 = cf[3 * k], hi = S->f[k], lo = -(S->f[k] + (k == S->tip ? S->f_cut : 0.0));
+            double slack = FORCE_SLACK * (S->f[k] + S->f_cut) + 1e-12;
+            if (c1 > hi + slack || c1 < lo - slack) {
+                next[k] = c1 < 0.0 ? NS_FRICTION_DYN_POS : NS_FRICTION_DYN_NEG;
+                bad++;
+            }
+        } else if (st[k] != NS_FRICTION_FREE) {
+            /* Eq. 11: the needle slides in its state's direction (needle minus tissue along t). */
+            double slide = -coupled_rel_slide(S, k, at, ar);
+            double sgn = st[k] == NS_FRICTION_DYN_POS ? 1.0 : -1.0;
+            if (sgn * slide < -SLIDE_SLACK) {
+                next[k] = NS_FRICTION_STATIC;
+                bad++;
+            }
+        }
+    }
+    return bad;
+}
+
+int tried_add(TriedSet *T, const uint8_t *st)
+{
+    if (T->count == T->cap) {
+        int cap = T->cap ? 2 * T->cap : 16;
+        uint8_t *p = realloc(T->cfg, (size_t)cap * (size_t)(T->q > 0 ? T->q : 1));
+        if (!p)
+            return -1;
+        T->cfg = p;
+        T->cap = cap;
+    }
+    memcpy(T->cfg + (size_t)T->count * (size_t)T->q, st, (size_t)T->q);
+    T->count++;
+    return 0;
+}
+
+static int tried_has(const TriedSet *T, const uint8_t *st)
+{
+    for (int i = 0; i < T->count; i++)
+        if (memcmp(T->cfg + (size_t)i * (size_t)T->q, st, (size_t)T->q) == 0)
+            return 1;
+    return 0;
+}
+
+void tried_next(const TriedSet *T, uint8_t *st)
+{
+    /* Digits STATIC < DYNAMIC- < DYNAMIC+ per coupling node, node 0 (the entry) least
+     * significant; bounded, since 3^q may be astronomically large. */
+    for (int guard = 0; guard < 100000 && tried_has(T, st); guard++)
+        for (int k = 0; k < T->q; k++) {
+            if (st[k] == NS_FRICTION_STATIC) {
+                st[k] = NS_FRICTION_DYN_NEG;
+                break;
+            }
+            if (st[k] == NS_FRICTION_DYN_NEG) {
+                st[k] = NS_FRICTION_DYN_POS;
+                break;
+            }
+            st[k] = NS_FRICTION_STATIC; /* carry */
+        }
+}
+
+/* Algorithm 3 with the paper's solver: CG on Eq. 7 per trial, warm-started from the previous
+ * trial, checked at tau_check, finished to tau_sol. */
+static int paper_lcp(CoupledSystem *S, NsCouplingStats *st)
+{
+    const NsCouplingParams *p = &S->c->params;
+    TriedSet T = {0, 0, S->q, NULL};
+    uint8_t *next = malloc((size_t)(S->q > 0 ? S->q : 1));
+    int rc = next ? 0 : -1;
+    st->consistent = 0;
+    for (int trial = 0; trial < p->max_trials && rc == 0; trial++) {
+        if (tried_add(&T, S->st)) {
+            rc = -1;
+            break;
+        }
+        st->trials++;
+        if (coupled_paper_solve(S, p->tau_check, p->max_iter, &st->iterations)) {
+            rc = -1;
+            break;
+        }
+        if (coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0) {
+            if (coupled_paper_solve(S, p->tau_sol, p->max_iter, &st->iterations)) {
+                rc = -1;
+                break;
+            }
+            if (coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0) {
+                st->consistent = 1;
+                break;
+            }
+        }
+        memcpy(S->st, next, (size_t)S->q);
+        tried_next(&T, S->st);
+    }
+    if (rc == 0 && !st->consistent) /* accept the last configuration (§3.6.1) */
+        rc = coupled_paper_solve(S, p->tau_sol, p->max_iter, &st->iterations);
+    st->unconverged = rc == 0 && !S->converged;
+    free(next);
+    free(T.cfg);
+    return rc;
+}
+
+/* ---- reparameterization (§3.4.2) after the step ---- */
+
+/* Moves the tip along the path by its slide through the tissue this step (cutting forward,
+ * retracting back), then rebuilds the needle's nodes: the held and free nodes before the entry
+ * keep their solved positions, the coupled ones take their tissue points' positions, free
+ * nodes past the exit theirs; every node is labelled by its distance from the base along the
+ * new polyline, scaled so the tip keeps the old total (the needle is not perfectly
+ * inextensible), and the rod's quantities are carried across (ns_rod_resample), then too long
+ * free edges split and too short ones merged. Friction states go to the nearest old node. */
+static int reparameterize(NsCoupled *c, NsCouplingStats *st)
+{
+    NsRod *r = c->rod;
+    const NsMesh *M = &c->tissue->mesh;
+    NsNeedlePath *p = &c->path;
+    int n = r->nodes;
+    int first = -1, last = -1;
+    for (int i = 0; i < n; i++)
+        if (c->ta[i] >= 0) {
+            first = first < 0 ? i : first;
+            last = i;
+        }
+    if (first < 0)
+        return 0; /* outside the tissue: nothing is coupled */
+    /* The tip's cut (or retreat): its slide along its tangent, mapped into material length on
+     * its edge. */
+    st->tip_slide = 0.0;
+    if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC) {
+        double xp[3], t[3], d[3];
+        tissue_point(c, n - 1, M->x, xp);
+        for (int k = 0; k < 3; k++) {
+            t[k] = r->x[3 * (n - 1) + k] - r->x[3 * (n - 2) + k];
+            d[k] = r->x[3 * (n - 1) + k] - xp[k];
+        }
+        double lt = norm3(t), slide = lt > 0.0 ? dot3(d, t) / lt : 0.0;
+        double ew[3], eu[3];
+        int a = c->ta[n - 1], b = c->tb[n - 1];
+        for (int k = 0; k < 3; k++) {
+            ew[k] = M->x[3 * b + k] - M->x[3 * a + k];
+            eu[k] = M->u[3 * b + k] - M->u[3 * a + k];
+        }
+        st->tip_slide = slide;
+        st->cutting = slide > 0.0 && c->state[n - 1] == NS_FRICTION_DYN_POS;
+        p->tip_s += slide * norm3(eu) / norm3(ew);
+        if (p->tip_s > p->s[p->count - 1])
+            p->through = 1; /* out through the far side: the tip is free */
+        if (p->tip_s < 0.0)
+            p->tip_s = 0.0;
+    }
+    int nb = ns_needle_path_behind(p);
+    int m_cap = n + p->count + 2;
+    double *buf = malloc((size_t)m_cap * 8 * sizeof *buf);
+    uint8_t *cst = malloc((size_t)m_cap);
+    if (!buf || !cst) {
+        free(buf);
+        free(cst);
+        return -1;
+    }
+    double *xn = buf, *s = xn + 3 * (size_t)m_cap, *dold = s + m_cap;
+    /* Old parameters: distance from the base along the solved polyline. */
+    dold[0] = 0.0;
+    for (int i = 1; i < n; i++) {
+        double e[3];
+        for (int k = 0; k < 3; k++)
+            e[k] = r->x[3 * i + k] - r->x[3 * (i - 1) + k];
+        dold[i] = dold[i - 1] + norm3(e);
+    }
+    double minlen = 0.25 * r->min_rest_edge;
+    int m = 0;
+    for (int i = 0; i < first; i++) {
+        /* Free nodes before the entry stay unless the needle slid them into the tissue. */
+        if (i >= r->held && nb > 1) {
+            double t[3], d[3];
+            for (int k = 0; k < 3; k++) {
+                t[k] = M->x[3 * p->node[1] + k] - M->x[3 * p->node[0] + k];
+                d[k] = r->x[3 * i + k] - M->x[3 * p->node[0] + k];
+            }
+            if (dot3(d, t) / norm3(t) > -minlen)
+                continue;
+        }
+        memcpy(xn + 3 * m, r->x + 3 * i, 3 * sizeof *xn);
+        m++;
+    }
+    int cfirst = m;
+    for (int k = 0; k < nb; k++, m++)
+        memcpy(xn + 3 * m, M->x + 3 * p->node[k], 3 * sizeof *xn);
+    if (!p->through) {
+        double w;
+        int e = ns_needle_path_tip(p, &w);
+        for (int k = 0; k < 3; k++)
+            xn[3 * m + k] = (1.0 - w) * M->x[3 * p->node[e] + k] + w * M->x[3 * p->node[e + 1] + k];
+        m++;
+    } else {
+        int pe = p->node[p->count - 1], pd = p->node[p->count - 2];
+        for (int i = last + 1; i < n; i++) {
+            double t[3], d[3];
+            for (int k = 0; k < 3; k++) {
+                t[k] = M->x[3 * pe + k] - M->x[3 * pd + k];
+                d[k] = r->x[3 * i + k] - M->x[3 * pe + k];
+            }
+            if (i < n - 1 && dot3(d, t) / norm3(t) < minlen)
+                continue;
+            memcpy(xn + 3 * m, r->x + 3 * i, 3 * sizeof *xn);
+            m++;
+        }
+    }
+    int rc = 0;
+    if (m < 3)
+        rc = -1;
+    s[0] = 0.0;
+    for (int j = 1; j < m && rc == 0; j++) {
+        double e[3];
+        for (int k = 0; k < 3; k++)
+            e[k] = xn[3 * j + k] - xn[3 * (j - 1) + k];
+        s[j] = s[j - 1] + norm3(e);
+        if (!(s[j] > s[j - 1]))
+            rc = -1;
+    }
+    if (rc == 0) {
+        double scale = dold[n - 1] / s[m - 1];
+        for (int j = 0; j < m; j++)
+            s[j] *= scale;
+        /* Friction states of the coupled new nodes: the nearest old coupled node's. */
+        int ncoup = nb + !p->through;
+        for (int j = 0; j < ncoup; j++) {
+            double best = INFINITY;
+            cst[j] = NS_FRICTION_STATIC;
+            for (int i = first; i <= last; i++)
+                if (fabs(dold[i] - s[cfirst + j]) < best) {
+                    best = fabs(dold[i] - s[cfirst + j]);
+                    cst[j] = c->state[i];
+                }
+        }
+        rc = ns_rod_resample(r, xn, s, m);
+        if (rc == 0 && reserve(c, r->cap))
+            rc = -1;
+        if (rc == 0) {
+            for (int i = 0; i < r->nodes; i++)
+                r->pinned[i] = i >= cfirst && i < cfirst + ncoup;
+            NsRodStats rs;
+            memset(&rs, 0, sizeof rs);
+            rc = ns_rod_reparameterize(r, &rs);
+            st->rod_splits += rs.splits;
+            st->rod_merges += rs.merges;
+        }
+        if (rc == 0 && reserve(c, r->cap))
+            rc = -1;
+        if (rc == 0) {
+            /* Split and merge never touch pinned (coupled) nodes: find the first again. */
+            int f2 = 0;
+            while (f2 < r->nodes && !r->pinned[f2])
+                f2++;
+            for (int i = 0; i < r->nodes; i++)
+                c->state[i] = i >= f2 && i < f2 + ncoup ? cst[i - f2] : NS_FRICTION_STATIC;
+            couple_from_path(c, f2, 1);
+        }
+    }
+    free(buf);
+    free(cst);
+    return rc;
+}
+
+/* ---- the step ---- */
+
+/* Local frame at needle node i (§3.3): t the normalized sum of the unit edge directions around
+ * it (the last edge's at the tip), n1 and n2 completing it (n1 from the axis least aligned). */
+static void local_frame(const NsRod *r, int i, double *R)
+{
+    double t[3] = {0, 0, 0};
+    for (int side = 0; side < 2; side++) {
+        int a = side ? i : i - 1, b = a + 1;
+        if (a < 0 || b >= r->nodes)
+            continue;
+        double e[3];
+        for (int k = 0; k < 3; k++)
+            e[k] = r->x[3 * b + k] - r->x[3 * a + k];
+        double l = norm3(e);
+        for (int k = 0; k < 3; k++)
+            t[k] += e[k] / l;
+    }
+    double l = norm3(t);
+    for (int k = 0; k < 3; k++)
+        t[k] /= l;
+    int ax = fabs(t[0]) <= fabs(t[1]) && fabs(t[0]) <= fabs(t[2]) ? 0
+             : fabs(t[1]) <= fabs(t[2])                           ? 1
+                                                                  : 2;
+    double n1[3] = {0, 0, 0}, n2[3];
+    n1[ax] = 1.0;
+    double d = dot3(n1, t);
+    for (int k = 0; k < 3; k++)
+        n1[k] -= d * t[k];
+    l = norm3(n1);
+    for (int k = 0; k < 3; k++)
+        n1[k] /= l;
+    n2[0] = t[1] * n1[2] - t[2] * n1[1];
+    n2[1] = t[2] * n1[0] - t[0] * n1[2];
+    n2[2] = t[0] * n1[1] - t[1] * n1[0];
+    for (int k = 0; k < 3; k++) {
+        R[k] = t[k];
+        R[3 + k] = n1[k];
+        R[6 + k] = n2[k];
+    }
+}
+
+/* Adds s * (w_a w_b) * B to the tissue blocks of the tissue point's nodes. */
+static void add_tissue_point_block(NsBlockMatrix *A, int a, int b, double w, const double *B,
+                                   double s)
+{
+    int nodes[2] = {a, b};
+    double ws[2] = {1.0 - w, w};
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) {
+            if (ws[i] == 0.0 || ws[j] == 0.0)
+                continue;
+            double *blk = ns_bsm_get(A, nodes[i], nodes[j]);
+            if (blk)
+                for (int k = 0; k < 9; k++)
+                    blk[k] += s * ws[i] * ws[j] * B[k];
+        }
+}
+
+int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
+                    NsCouplingStats *stats)
+{
+    NsCouplingStats st;
+    memset(&st, 0, sizeof st);
+    double t0 = now_ms();
+    NsTissue *T = c->tissue;
+    NsRod *r = c->rod;
+    NsMesh *M = &T->mesh;
+    double beta = T->params.beta, gamma = T->params.gamma;
+    NsRodStats rs;
+    memset(&rs, 0, sizeof rs);
+    NsRodSystem sys;
+    double tn = now_ms();
+    if (ns_rod_begin_step(r, dt, ext_rod, &sys, &rs)) {
+        st.nan_count = rs.nan_count;
+        if (stats)
+            *stats = st;
+        return -1;
+    }
+    st.needle_ms = now_ms() - tn;
+    double tt = now_ms();
+    NsTissueStats ts;
+    memset(&ts, 0, sizeof ts);
+    double *bt = ns_tissue_begin_step(T, dt, ext_tissue, &ts);
+    st.tissue_ms = now_ms() - tt;
+    double tl = now_ms();
+
+    /* The coupled system of this step. */
+    CoupledSystem S;
+    memset(&S, 0, sizeof S);
+    S.c = c;
+    S.nt3 = 3 * M->node_slots;
+    S.nr3 = sys.n3;
+    S.bdt2 = beta * dt * dt;
+    S.At = &T->A;
+    S.tfixed = T->dof_fixed;
+    S.bt = bt;
+    S.Ar = sys.A;
+    S.rfixed = sys.dof_fixed;
+    S.br = sys.rhs;
+    S.ar = sys.anew;
+    S.at = bt + S.nt3; /* t->work's second vector */
+    S.threads = c->params.threads;
+    S.tip = -1;
+    int q = 0;
+    for (int i = 0; i < r->nodes; i++)
+        q += c->ta[i] >= 0;
+    S.q = q;
+    size_t need = (size_t)q * 24 + 16;
+    double *w = scratch(c, need);
+    int *iw = malloc((size_t)(3 * q + 1) * sizeof *iw);
+    uint8_t *sw = malloc((size_t)q + 1);
+    if (!w || !iw || !sw) {
+        free(iw);
+        free(sw);
+        ns_rod_abort_step(r);
+        return -1;
+    }
+    S.tw = w;
+    S.R = S.tw + q;
+    S.f = S.R + 9 * q;
+    S.e = S.f + q;
+    S.yrel = S.e + 3 * q;
+    S.cf = S.yrel + 3 * q;
+    S.idx = iw;
+    S.ta = iw + q;
+    S.tb = iw + 2 * q;
+    S.st = sw;
+    const double *rl = r->rest_len;
+    for (int i = 0, k = 0; i < r->nodes; i++) {
+        if (c->ta[i] < 0)
+            continue;
+        S.idx[k] = i;
+        S.ta[k] = c->ta[i];
+        S.tb[k] = c->tb[i];
+        S.tw[k] = c->tw[i];
+        S.st[k] = c->state[i];
+        local_frame(r, i, S.R + 9 * k);
+        /* f_i = f_perlen (l_{i-1} + l_i) / 2 over the halves of edges inside the tissue. */
+        double len = 0.0;
+        if (i > 0 && c->ta[i - 1] >= 0)
+            len += 0.5 * rl[i - 1];
+        if (i + 1 < r->nodes && c->ta[i + 1] >= 0)
+            len += 0.5 * rl[i];
+        S.f[k] = c->params.f_perlen * len;
+        if (i == r->nodes - 1 && !c->path.through) {
+            S.tip = k;
+            S.f_cut =
+                ns_needle_path_cut_force(&c->path, M, c->params.cut_force, NS_COUPLING_MAX_REGIONS);
+        }
+        /* Known part of the step's displacement, tissue minus needle (Eq. 1 without a'). */
+        double yh[3], vh[3], ah[3];
+        coupled_point(&S, k, M->v, vh);
+        coupled_point(&S, k, M->a, ah);
+        for (int d = 0; d < 3; d++) {
+            yh[d] = dt * vh[d] + dt * dt * (0.5 - beta) * ah[d];
+            double yn = dt * r->v[3 * i + d] + dt * dt * (0.5 - beta) * r->a[3 * i + d];
+            S.yrel[3 * k + d] = yh[d] - yn;
+        }
+        /* Eq. 8 in the local axes: R^T (dx_tissue - dx_needle) = 0, i.e. beta dt^2 R^T (a_t -
+         * a_n) = -R^T yrel. */
+        for (int col = 0; col < 3; col++)
+            S.e[3 * k + col] = -dot3(S.R + 9 * k + 3 * col, S.yrel + 3 * k) / S.bdt2;
+        /* Viscous friction along t (§3.3), implicit in each side's own velocity: the force on
+         * the needle eta_i l (t.(v_t - v_n)) t; A gains gamma dt eta_i l t t^T on both sides. */
+        if (c->params.eta > 0.0) {
+            double eta = c->params.eta * len, B[9], vrel[3];
+            const double *t = S.R + 9 * k;
+            for (int a = 0; a < 3; a++)
+                for (int b = 0; b < 3; b++)
+                    B[3 * a + b] = eta * t[a] * t[b];
+            for (int d = 0; d < 3; d++)
+                vrel[d] = vh[d] - r->v[3 * i + d];
+            double fv = dot3(t, vrel) * eta, an_t = dot3(t, r->a + 3 * i), ah_t = dot3(t, ah);
+            for (int d = 0; d < 3; d++) {
+                sys.rhs[3 * i + d] += t[d] * (fv - eta * dt * (1.0 - gamma) * an_t);
+                double ft = -t[d] * (fv + eta * dt * (1.0 - gamma) * ah_t);
+                S.bt[3 * S.ta[k] + d] += (1.0 - S.tw[k]) * ft;
+                S.bt[3 * S.tb[k] + d] += S.tw[k] * ft;
+            }
+            double *nb = ns_banded_block((NsBanded *)sys.A, i, i);
+            for (int d = 0; d < 9; d++)
+                nb[d] += gamma * dt * B[d];
+            add_tissue_point_block(&T->A, S.ta[k], S.tb[k], S.tw[k], B, gamma * dt);
+        }
+        k++;
+    }
+    for (int i = 0; i < S.nt3; i++)
+        S.at[i] = T->dof_fixed[i] ? 0.0 : M->a[i];
+    for (int k = 0; k < q; k++)
+        for (int d = 0; d < 3; d++)
+            S.cf[3 * k + d] = d == 0 ? coupled_known_force(&S, k, S.st[k]) : 0.0;
+
+    int rc = paper_lcp(&S, &st);
+    int finite = rc == 0;
+    for (int i = 0; i < S.nt3 && finite; i++)
+        finite = isfinite(S.at[i]);
+    for (int i = 0; i < S.nr3 && finite; i++)
+        finite = isfinite(S.ar[i]);
+    st.lcp_ms = now_ms() - tl;
+    if (!finite) {
+        st.nan_count += rc == 0;
+        ns_rod_abort_step(r);
+        free(iw);
+        free(sw);
+        st.total_ms = now_ms() - t0;
+        if (stats)
+            *stats = st;
+        return -1;
+    }
+    st.coupled = q;
+    for (int k = 0; k < q; k++) {
+        c->state[S.idx[k]] = S.st[k];
+        st.n_static += S.st[k] == NS_FRICTION_STATIC;
+        st.n_dyn_pos += S.st[k] == NS_FRICTION_DYN_POS;
+        st.n_dyn_neg += S.st[k] == NS_FRICTION_DYN_NEG;
+        st.axial_force += S.cf[3 * k]; /* the tangential force on the needle */
+    }
+    ns_tissue_end_step(T, dt, S.at);
+    ns_rod_end_step(r, dt, S.ar, &rs);
+    free(iw);
+    free(sw);
+    double tr = now_ms();
+    if (reparameterize(c, &st)) {
+        st.total_ms = now_ms() - t0;
+        if (stats)
+            *stats = st;
+        return -1;
+    }
+    st.remesh_ms = now_ms() - tr;
+    /* Inverted tets are counted at the next force evaluation; report the last one's. */
+    st.inverted = ts.inverted;
+    c->steps++;
+    st.total_ms = now_ms() - t0;
+    if (stats)
+        *stats = st;
+    return 0;
+}
+
+uint64_t ns_coupled_state_hash(const NsCoupled *c)
+{
+    uint64_t h =
+        ns_tissue_state_hash(c->tissue) ^ (ns_rod_state_hash(c->rod) * 0x9E3779B97F4A7C15ull);
+    for (int i = 0; i < c->rod->nodes; i++) {
+        h ^= c->state[i];
+        h *= 0x100000001b3ull;
+    }
+    return h;
+}

@@ -1,0 +1,124 @@
+/* Needle-tissue coupling with stick-slip friction and cutting (paper §3.3, §3.6.1, Algorithm 3,
+ * Eq. 7-11), solved every step together with the tissue (sim/tissue.h) and the needle
+ * (sim/rod.h).
+ *
+ * Coupling nodes. A needle node inside the tissue sits at a tissue point: a tissue node, or, for
+ * the tip, a point on a tissue edge (weights 1 - w and w on its two nodes; see sim/needle_path.h).
+ * Each needle node has a friction state: FREE (outside the tissue), STATIC (needle and tissue move
+ * together there), DYNAMIC+ (the needle slides forward, towards its tip, through the tissue) or
+ * DYNAMIC- (backward). At coupling node i the local frame R_i = [t_i n1_i n2_i] has the tangent of
+ * §3.3; the constraint force c_i (on the needle; the tissue gets -c_i) is unknown in the
+ * constrained directions: all three for STATIC, the two normal ones for DYNAMIC, whose tangential
+ * component is the known friction -s_i f_i (s_i = +1 for DYNAMIC+). The constraints (Eq. 8) keep
+ * the tissue point and the needle node moving together in the constrained directions over the
+ * step. Friction per node f_i = f_perlen (l_{i-1} + l_i) / 2 (only the halves of needle edges that
+ * lie inside the tissue count, so the needle's total is f_perlen times the length inside); at a
+ * cutting tip (DYNAMIC+ inside the tissue) f_cut of the tissue it cuts is added: per tissue
+ * region, so a membrane region (prostate capsule, skin) gets a large one (capsule puncture).
+ * Viscous friction eta (l_{i-1} + l_i) / 2 (v_tissue - v_needle) along t acts on both sides,
+ * implicit in each side's own velocity.
+ *
+ * Friction states (Algorithm 3, §3.6.1): guessed from the previous step, checked against
+ * Eq. 9-11 (a STATIC node's tangential force within [-f, f], at the tip [-(f + f_cut), f]; a
+ * DYNAMIC node's relative tangential motion in its sign's direction), violators flipped (DYNAMIC
+ * -> STATIC; STATIC -> DYNAMIC in the direction the force pushes the needle), a configuration
+ * tried before replaced by the next one in lexicographic order (entry node least significant),
+ * at most max_trials trials, checked at tau_check before finishing to tau_sol.
+ *
+ * Linear solvers (one interface, NsCoupledSolverKind):
+ *   PAPER  CG on the whole indefinite system Eq. 7, the constraint rows applied node by node and
+ *          never assembled, warm-started from the previous trial (§3.6.1-3.6.2). The baseline,
+ *          and for now the only one: ours (a Schur-complement path, docs/solvers.md "Coupled
+ *          solve") is not built yet.
+ *
+ * SI units throughout. */
+#ifndef NS_COUPLING_H
+#define NS_COUPLING_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "needle_path.h"
+#include "rod.h"
+#include "solver.h"
+#include "tissue.h"
+
+typedef enum NsFriction {
+    NS_FRICTION_FREE = 0,
+    NS_FRICTION_STATIC = 1,
+    NS_FRICTION_DYN_NEG = 2, /* the needle slides backward (out of the tissue) */
+    NS_FRICTION_DYN_POS = 3, /* the needle slides forward (towards its tip) */
+} NsFriction;
+
+typedef enum NsCoupledSolverKind {
+    NS_COUPLED_PAPER = 1, /* CG on Eq. 7, the paper's */
+} NsCoupledSolverKind;
+
+#define NS_COUPLING_MAX_REGIONS 32
+
+typedef struct NsCouplingParams {
+    double f_perlen; /* friction per unit length inside the tissue [N/m] */
+    double eta;      /* viscous friction per unit length [N s/m^2] */
+    double cut_force[NS_COUPLING_MAX_REGIONS]; /* f_cut by tissue region [N] */
+    double tau_check, tau_sol;                 /* relative residuals (§3.6.1: 1e-3, 1e-5) */
+    int max_trials;                            /* friction configurations tried per step (10) */
+    int max_iter;                              /* iterations per linear solve */
+    NsCoupledSolverKind solver;
+    int threads; /* for the SpMV and vector loops; results do not depend on it */
+} NsCouplingParams;
+
+NsCouplingParams ns_default_coupling_params(void);
+
+typedef struct NsCouplingStats {
+    double total_ms, tissue_ms, needle_ms, lcp_ms, remesh_ms; /* the paper's Table 2 columns */
+    int trials;     /* linear solves of Eq. 7 with a friction configuration (Table 3) */
+    int iterations; /* CG iterations, all trials */
+    int consistent; /* the accepted friction states satisfy Eq. 9-11 */
+    int coupled;    /* coupling nodes this step */
+    int n_static, n_dyn_pos, n_dyn_neg;
+    int cutting;        /* the tip cut this step (DYNAMIC+ inside the tissue) */
+    double axial_force; /* force the tissue puts on the needle along its axis, summed [N]:
+                           negative = resisting insertion */
+    double tip_slide;   /* the tip's slide through the tissue this step [m], + = forward */
+    int unconverged;    /* the final solve missed tau_sol */
+    int nan_count;      /* non-finite values caught (the step is rejected) */
+    int inverted;       /* inverted tets after the step */
+    int rod_splits, rod_merges;
+} NsCouplingStats;
+
+typedef struct NsCoupled {
+    NsTissue *tissue; /* borrowed */
+    NsRod *rod;       /* borrowed */
+    NsNeedlePath path;
+    NsCouplingParams params;
+    /* Per needle node (cap): tissue nodes and weight of its tissue point (ta -1: FREE) and its
+     * friction state. */
+    int cap;
+    int *ta, *tb;
+    double *tw;
+    uint8_t *state;
+    double *work; /* scratch */
+    size_t work_cap;
+    uint64_t steps;
+} NsCoupled;
+
+/* Couples rod to tissue along path: the rod's nodes from node `first` on must sit at the path's
+ * nodes 0, 1, ... (within 1e-9 m), up to the tip, which lies on the path (at a node, or on an
+ * edge) or, if the rod goes on beyond the path's last node, past it. Friction states start
+ * STATIC. Takes over path. Returns 0, or -1 with a message. */
+int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *path,
+                    const NsCouplingParams *params, char *err, int err_sz);
+void ns_coupled_free(NsCoupled *c);
+
+/* One step of Algorithm 1 without remeshing: forces and Jacobians (tissue, needle, rod controls
+ * applied), the coupled solve with friction (Eq. 7, Algorithm 3), the Newmark update of both,
+ * the tip's cut along the path, and the needle's reparameterization (§3.4.2). ext_tissue (3
+ * node_slots) and ext_rod (3 nodes) may be NULL. Returns 0, or -1 (bad dt or control, a failed
+ * solve, non-finite values: the state is as before the step, stats say why). */
+int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
+                    NsCouplingStats *stats);
+
+/* Hash of the tissue's and the needle's states and the friction states. */
+uint64_t ns_coupled_state_hash(const NsCoupled *c);
+
+#endif
