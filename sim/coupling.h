@@ -28,8 +28,8 @@
  * Linear solvers (one interface, NsCoupledSolverKind):
  *   PAPER  CG on the whole indefinite system Eq. 7, the constraint rows applied node by node and
  *          never assembled, warm-started from the previous trial (§3.6.1-3.6.2). The baseline,
- *          and for now the only one: ours (a Schur-complement path, docs/solvers.md "Coupled
- *          solve") is not built yet.
+ *          and for now the only one: ours (a Schur-complement path, docs/coupling.md "Limits")
+ *          is not built yet.
  *
  * SI units throughout. */
 #ifndef NS_COUPLING_H
