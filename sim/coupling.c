@@ -41,9 +41,23 @@ NsCouplingParams ns_default_coupling_params(void)
     p.tau_sol = 1e-8;
     p.max_trials = 10;
     p.max_iter = 5000;
-    p.solver = NS_COUPLED_PAPER;
+    p.solver = NS_COUPLED_SCHUR;
     p.threads = 1;
     return p;
+}
+
+const char *ns_coupled_solver_name(NsCoupledSolverKind kind)
+{
+    return kind == NS_COUPLED_PAPER ? "paper" : kind == NS_COUPLED_SCHUR ? "schur" : "?";
+}
+
+int ns_coupled_solver_parse(const char *name)
+{
+    if (strcmp(name, "paper") == 0)
+        return NS_COUPLED_PAPER;
+    if (strcmp(name, "schur") == 0)
+        return NS_COUPLED_SCHUR;
+    return -1;
 }
 
 static int reserve(NsCoupled *c, int cap)
@@ -134,15 +148,28 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     const NsCouplingParams *q = &c->params;
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
-        q->solver != NS_COUPLED_PAPER) {
+        (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
-                 "max_trials and max_iter >= 1, solver paper (the only one yet)");
-        *path = (NsNeedlePath){0};
+                 "max_trials and max_iter >= 1, solver schur or paper");
+        ns_needle_path_free(path); /* taken over, even on failure */
+        return -1;
+    }
+    if (tissue->params.beta != rod->params.beta || tissue->params.gamma != rod->params.gamma) {
+        snprintf(err, (size_t)err_sz,
+                 "coupling: tissue and needle must share Newmark's beta and gamma (tissue %g, %g; "
+                 "needle %g, %g)",
+                 tissue->params.beta, tissue->params.gamma, rod->params.beta, rod->params.gamma);
+        ns_needle_path_free(path);
         return -1;
     }
     c->path = *path;
     *path = (NsNeedlePath){0};
+    if (q->solver == NS_COUPLED_SCHUR && !(c->schur = coupled_schur_create())) {
+        snprintf(err, (size_t)err_sz, "coupling: out of memory");
+        ns_coupled_free(c);
+        return -1;
+    }
     if (reserve(c, rod->cap)) {
         snprintf(err, (size_t)err_sz, "coupling: out of memory");
         ns_coupled_free(c);
@@ -196,6 +223,7 @@ void ns_coupled_free(NsCoupled *c)
     free(c->tw);
     free(c->state);
     free(c->work);
+    coupled_schur_destroy(c->schur);
     memset(c, 0, sizeof *c);
 }
 
@@ -233,8 +261,8 @@ double coupled_rel_slide(const CoupledSystem *S, int k, const double *at, const 
 #define FORCE_SLACK 1e-3
 #define SLIDE_SLACK 1e-9
 
-int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, const double *at,
-                  const double *ar, uint8_t *next)
+int coupled_check_slides(const CoupledSystem *S, const uint8_t *st, const double *cf,
+                         const double *slide, uint8_t *next)
 {
     int bad = 0;
     for (int k = 0; k < S->q; k++) {
@@ -250,14 +278,28 @@ int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, c
             }
         } else if (st[k] != NS_FRICTION_FREE) {
             /* Eq. 11: the needle slides in its state's direction (needle minus tissue along t). */
-            double slide = -coupled_rel_slide(S, k, at, ar);
             double sgn = st[k] == NS_FRICTION_DYN_POS ? 1.0 : -1.0;
-            if (sgn * slide < -SLIDE_SLACK) {
+            if (-sgn * slide[k] < -SLIDE_SLACK) {
                 next[k] = NS_FRICTION_STATIC;
                 bad++;
             }
         }
     }
+    return bad;
+}
+
+int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, const double *at,
+                  const double *ar, uint8_t *next)
+{
+    double *slide = malloc((size_t)(S->q > 0 ? S->q : 1) * sizeof *slide);
+    if (!slide) { /* no memory: report every node inconsistent, unchanged */
+        memcpy(next, st, (size_t)S->q);
+        return S->q > 0 ? S->q : 1;
+    }
+    for (int k = 0; k < S->q; k++)
+        slide[k] = coupled_rel_slide(S, k, at, ar);
+    int bad = coupled_check_slides(S, st, cf, slide, next);
+    free(slide);
     return bad;
 }
 
@@ -696,7 +738,8 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         for (int d = 0; d < 3; d++)
             S.cf[3 * k + d] = d == 0 ? coupled_known_force(&S, k, S.st[k]) : 0.0;
 
-    int rc = paper_lcp(&S, &st);
+    int rc = c->params.solver == NS_COUPLED_PAPER ? paper_lcp(&S, &st)
+                                                  : coupled_schur_lcp(c->schur, &S, &st);
     int finite = rc == 0;
     for (int i = 0; i < S.nt3 && finite; i++)
         finite = isfinite(S.at[i]);

@@ -26,10 +26,13 @@
  * at most max_trials trials, checked at tau_check before finishing to tau_sol.
  *
  * Linear solvers (one interface, NsCoupledSolverKind):
+ *   SCHUR  ours, the default (sim/coupled_schur.c, docs/coupling.md): a stale CHOLMOD factor of
+ *          the tissue matrix, the dense compliance of the coupling DOFs from cached factor
+ *          columns, projected PCG with the constraint preconditioner for the exact solves, and
+ *          flipped friction configurations tried on the dense compliance first.
  *   PAPER  CG on the whole indefinite system Eq. 7, the constraint rows applied node by node and
- *          never assembled, warm-started from the previous trial (§3.6.1-3.6.2). The baseline,
- *          and for now the only one: ours (a Schur-complement path, docs/coupling.md "Limits")
- *          is not built yet.
+ *          never assembled, warm-started from the previous trial (§3.6.1-3.6.2). The baseline
+ *          every speed claim is measured against.
  *
  * SI units throughout. */
 #ifndef NS_COUPLING_H
@@ -51,8 +54,13 @@ typedef enum NsFriction {
 } NsFriction;
 
 typedef enum NsCoupledSolverKind {
+    NS_COUPLED_SCHUR = 0, /* ours, the default: stale factor, dense compliance, projected PCG */
     NS_COUPLED_PAPER = 1, /* CG on Eq. 7, the paper's */
 } NsCoupledSolverKind;
+
+/* "schur" / "paper", and back (-1 for an unknown name). */
+const char *ns_coupled_solver_name(NsCoupledSolverKind kind);
+int ns_coupled_solver_parse(const char *name);
 
 #define NS_COUPLING_MAX_REGIONS 32
 
@@ -71,8 +79,11 @@ NsCouplingParams ns_default_coupling_params(void);
 
 typedef struct NsCouplingStats {
     double total_ms, tissue_ms, needle_ms, lcp_ms, remesh_ms; /* the paper's Table 2 columns */
-    int trials;     /* linear solves of Eq. 7 with a friction configuration (Table 3) */
-    int iterations; /* CG iterations, all trials */
+    int trials;     /* friction configurations tried (Table 3): each an exact solve of Eq. 7
+                       (paper), or a dense solve on the compliance and, if consistent there,
+                       an exact one (schur) */
+    int iterations; /* CG iterations (paper) or projected PCG iterations (schur), all trials */
+    int refactors;  /* schur: factorizations of the tissue matrix this step */
     int consistent; /* the accepted friction states satisfy Eq. 9-11 */
     int coupled;    /* coupling nodes this step */
     int n_static, n_dyn_pos, n_dyn_neg;
@@ -99,6 +110,7 @@ typedef struct NsCoupled {
     uint8_t *state;
     double *work; /* scratch */
     size_t work_cap;
+    struct CoupledSchur *schur; /* our solver's state between steps (NS_COUPLED_SCHUR) */
     uint64_t steps;
 } NsCoupled;
 

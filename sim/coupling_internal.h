@@ -1,5 +1,5 @@
 /* Shared between the coupling driver (coupling.c) and its two linear-solver paths
- * (coupled_paper.c; ours to come): the coupled system of one step, Eq. 7. */
+ * (coupled_paper.c, coupled_schur.c): the coupled system of one step, Eq. 7. */
 #ifndef NS_COUPLING_INTERNAL_H
 #define NS_COUPLING_INTERNAL_H
 
@@ -43,6 +43,10 @@ double coupled_rel_slide(const CoupledSystem *S, int k, const double *at, const 
  * states a flip would give into next (unchanged where consistent). Returns violations. */
 int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, const double *at,
                   const double *ar, uint8_t *next);
+/* The same with the relative tangential slides (tissue minus needle, per coupling node [m])
+ * given instead of the accelerations. */
+int coupled_check_slides(const CoupledSystem *S, const uint8_t *st, const double *cf,
+                         const double *slide, uint8_t *next);
 /* The tried-configuration memory of Algorithm 3. */
 typedef struct TriedSet {
     int count, cap, q;
@@ -52,6 +56,12 @@ int tried_add(TriedSet *T, const uint8_t *st);
 /* Makes st untried: unchanged if new, else the next configurations in lexicographic order
  * (coupling node 0, the entry, least significant). */
 void tried_next(const TriedSet *T, uint8_t *st);
+
+/* Our solver (coupled_schur.c): its state kept between steps, and Algorithm 3 with it. */
+typedef struct CoupledSchur CoupledSchur;
+CoupledSchur *coupled_schur_create(void);
+void coupled_schur_destroy(CoupledSchur *w);
+int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st);
 
 /* The linear solves: for the states S->st, to relative residual tol, warm-started from at, ar,
  * cf. Return 0 or -1; add their iterations. */

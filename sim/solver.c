@@ -72,6 +72,7 @@ struct NsSolver {
                               factorization overwrites it rather than allocating (~10 ms of page
                               faults for the box's 24 MB factor) */
     long factor_solve;     /* the solve whose matrix L is the factor of */
+    long factors;          /* factors made and adopted so far (ns_solver_factor_count) */
     uint64_t pattern;      /* hash of the pattern Lsym was analyzed for */
     int nfree;             /* scalar free DOFs Lsym was built for */
     RefreshJob job;
@@ -79,6 +80,7 @@ struct NsSolver {
      * iteration cost more than the triangular solves). */
     cholmod_dense *B, *X, *Y, *E;
     int *dof; /* (3n) free index of each scalar DOF, -1 if fixed */
+    int n3;   /* 3n of the last numbering */
     int dof_cap;
     double *work; /* 5 vectors of 3n for CG, then the chunk partial sums */
     int work_cap;
@@ -275,6 +277,7 @@ static int number_dofs(NsSolver *s, int n, const uint8_t *fixed)
     if (ensure((void **)&s->dof, &s->dof_cap, 3 * n > 0 ? 3 * n : 1, sizeof(int)))
         return -1;
     int f = 0;
+    s->n3 = 3 * n;
     for (int i = 0; i < 3 * n; i++)
         s->dof[i] = (fixed && fixed[i]) ? -1 : f++;
     return f;
@@ -377,6 +380,7 @@ static int factor_sync(NsSolver *s, const NsBlockMatrix *A, int nfree, uint64_t 
         return -1;
     }
     s->factor_solve = s->solves;
+    s->factors++;
     return 0;
 }
 
@@ -434,6 +438,7 @@ static void job_adopt(NsSolver *s, uint64_t h, int nfree, NsSolveStats *st)
         s->L = j->L;
         j->L = NULL;
         s->factor_solve = j->made_at;
+        s->factors++;
         st->refresh_adopted = 1;
     }
     job_cancel(s); /* frees whatever was not adopted */
@@ -715,4 +720,53 @@ restart:;
     if (stats)
         *stats = st;
     return 0;
+}
+
+int ns_solver_factor(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed)
+{
+    if (!s || (s->kind != NS_SOLVER_DIRECT && s->kind != NS_SOLVER_STALE_PCG))
+        return -1;
+    int nfree = number_dofs(s, A->n, dof_fixed);
+    if (nfree < 0)
+        return -1;
+    NsSolveStats st = {0};
+    return factor_sync(s, A, nfree, pattern_hash(A, s->dof), &st);
+}
+
+int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z)
+{
+    if (!s || !s->L || n3 != s->n3 || ncols < 0)
+        return -1;
+    if (ncols == 0)
+        return 0;
+    if (ncols == 1) /* one column: the solve's kept buffers */
+        return apply_factor(s, n3, B, Z);
+    int nfree = s->nfree;
+    cholmod_dense *Bd =
+        cholmod_allocate_dense((size_t)nfree, (size_t)ncols, (size_t)nfree, CHOLMOD_REAL, &s->cm);
+    if (!Bd)
+        return -1;
+    double *bx = Bd->x;
+    for (int j = 0; j < ncols; j++)
+        for (int i = 0; i < n3; i++)
+            if (s->dof[i] >= 0)
+                bx[(size_t)j * (size_t)nfree + (size_t)s->dof[i]] = B[(size_t)j * (size_t)n3 + i];
+    OmpSerial o = omp_serial_begin();
+    cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, Bd, &s->cm);
+    omp_serial_end(o);
+    cholmod_free_dense(&Bd, &s->cm);
+    if (!X)
+        return -1;
+    const double *xx = X->x;
+    for (int j = 0; j < ncols; j++)
+        for (int i = 0; i < n3; i++)
+            Z[(size_t)j * (size_t)n3 + i] =
+                s->dof[i] >= 0 ? xx[(size_t)j * (size_t)nfree + (size_t)s->dof[i]] : 0.0;
+    cholmod_free_dense(&X, &s->cm);
+    return 0;
+}
+
+long ns_solver_factor_count(const NsSolver *s)
+{
+    return s ? s->factors : 0;
 }

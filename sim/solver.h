@@ -87,4 +87,20 @@ void ns_solver_refresh(NsSolver *s);
 int ns_solver_solve(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed, const double *b,
                     double *x, double tol, int max_iter, NsSolveStats *stats);
 
+/* ---- The factor on its own (DIRECT or STALE_PCG solvers), for callers that build on it: the
+ * coupled solver (sim/coupled_schur.c) factors the tissue matrix now and then and applies the
+ * (possibly stale) factor as a preconditioner and to many columns at once. ---- */
+
+/* Factors A's free block now (a symbolic analysis only if the pattern or the fixed DOFs
+ * changed); a pending refactorization is dropped. Returns 0, or -1 (not positive definite,
+ * memory, or a solver of another kind). */
+int ns_solver_factor(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed);
+/* Z = A^-1 B with the current factor for ncols columns of n3 entries each (column j at
+ * B + j n3; n3 = 3 x the nodes of the factored matrix): fixed DOFs' entries of B are ignored
+ * and those of Z are 0. B and Z must not overlap. Returns 0, or -1 (no factor, n3 differs,
+ * memory). */
+int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z);
+/* Counts the factors made so far: it changes whenever the factor in use changes. */
+long ns_solver_factor_count(const NsSolver *s);
+
 #endif

@@ -378,8 +378,67 @@ static int fallbacks_drop_pending_refresh(void)
     return 0;
 }
 
+/* The factor on its own: ns_solver_apply on many columns (and on one) gives A^-1 B on the free
+ * DOFs, 0 on the fixed ones; the count changes with each factor; a wrong length or no factor is
+ * an error. */
+static int factor_applied_to_columns(void)
+{
+    const int m = 6, n = m * m * m, n3 = 3 * n, cols = 5;
+    NsBlockMatrix A;
+    grid_matrix(&A, m, 1e3, 1.0);
+    uint8_t *fixed = calloc((size_t)n3, 1);
+    for (int i = 0; i < 3 * m * m; i++)
+        fixed[i] = 1;
+    double *B = malloc((size_t)n3 * cols * sizeof *B), *Z = malloc((size_t)n3 * cols * sizeof *Z);
+    double *x = malloc((size_t)n3 * sizeof *x);
+    for (int i = 0; i < n3 * cols; i++)
+        B[i] = cos(0.11 * i) + 0.2;
+    NsSolver *s = ns_solver_create(NS_SOLVER_DIRECT);
+    ENSURE(ns_solver_apply(s, n3, 1, B, Z) == -1); /* no factor yet */
+    ENSURE(ns_solver_factor_count(s) == 0);
+    ENSURE(ns_solver_factor(s, &A, fixed) == 0);
+    ENSURE(ns_solver_factor_count(s) == 1);
+    ENSURE(ns_solver_apply(s, n3 - 3, 1, B, Z) == -1); /* not the factored size */
+    ENSURE(ns_solver_apply(s, n3, cols, B, Z) == 0);
+    for (int j = 0; j < cols; j++) {
+        const double *b = B + (size_t)j * n3, *z = Z + (size_t)j * n3;
+        for (int i = 0; i < n3; i++)
+            x[i] = 0.0;
+        NsSolveStats st;
+        NsSolver *d = ns_solver_create(NS_SOLVER_DIRECT);
+        ENSURE(ns_solver_solve(d, &A, fixed, b, x, 1e-12, 0, &st) == 0);
+        ns_solver_destroy(d);
+        double err = 0.0, nrm = 0.0;
+        for (int i = 0; i < n3; i++) {
+            if (fixed[i])
+                ENSURE(z[i] == 0.0);
+            err += (z[i] - x[i]) * (z[i] - x[i]);
+            nrm += x[i] * x[i];
+        }
+        ENSURE(sqrt(err / nrm) < 1e-12);
+    }
+    double *z1 = malloc((size_t)n3 * sizeof *z1);
+    ENSURE(ns_solver_apply(s, n3, 1, B + n3, z1) == 0);
+    for (int i = 0; i < n3; i++)
+        ENSURE(fabs(z1[i] - Z[n3 + i]) <= 1e-12 * (fabs(Z[n3 + i]) + 1e-30));
+    ENSURE(ns_solver_factor(s, &A, fixed) == 0);
+    ENSURE(ns_solver_factor_count(s) == 2);
+    NsSolver *cg = ns_solver_create(NS_SOLVER_CG);
+    ENSURE(ns_solver_factor(cg, &A, fixed) == -1); /* CG has no factor */
+    ns_solver_destroy(cg);
+    ns_solver_destroy(s);
+    ns_bsm_free(&A);
+    free(fixed);
+    free(B);
+    free(Z);
+    free(x);
+    free(z1);
+    return 0;
+}
+
 NS_TEST_MAIN({"all_kinds_agree", all_kinds_agree},
              {"stale_factor_preconditions_and_refreshes", stale_factor_preconditions_and_refreshes},
              {"threads_give_identical_iterates", threads_give_identical_iterates},
              {"background_refresh_adopted_on_schedule", background_refresh_adopted_on_schedule},
-             {"fallbacks_drop_pending_refresh", fallbacks_drop_pending_refresh})
+             {"fallbacks_drop_pending_refresh", fallbacks_drop_pending_refresh},
+             {"factor_applied_to_columns", factor_applied_to_columns})

@@ -1,0 +1,756 @@
+/* Our linear-solver path for the coupled system Eq. 7 and Algorithm 3 on top of it
+ * (docs/coupling.md, "Solver: ours"). Written H x + B^T c = b, with x = (a_t, a_n), H =
+ * diag(A_t, A_n), c the constraint forces on the needle in the local frames (only the active
+ * components: all three at a STATIC node, the two normal ones at a DYNAMIC one, whose tangent
+ * carries the known friction in b) and B^T c = (G_t c, -G_n c), G the local frames spread onto
+ * the tissue point's nodes (weights) and the needle node.
+ *
+ * 1. A CHOLMOD factor F of a recent tissue matrix A_t (stale by a few steps: refreshed when the
+ *    solves start to need many iterations), the needle's band matrix solved exactly.
+ * 2. The compliance of the coupling DOFs, C = G_t^T F^-1 G_t + G_n^T A_n^-1 G_n (3q x 3q,
+ *    dense), from columns F^-1 e cached per coupled tissue node (3 each; computed once per
+ *    factor, so a needle that advances by one node costs 3 solves) and 3q band solves.
+ * 3. The exact solve for a friction configuration: projected preconditioned CG (Gould, Hribar &
+ *    Nocedal 2001) with the constraint preconditioner [F~ B^T; B 0] (F~ = diag(F, A_n)), applied
+ *    through C's active block: every iterate meets the constraints, so CG runs on the
+ *    constraints' null space, where H is definite, preconditioned by the stale factor; a few
+ *    iterations per solve. The residual is the first block's, H x + B^T c - b, scaled as the
+ *    paper solver's (unit diagonal) and relative to its right-hand side; c is the sum of the
+ *    projections' multipliers ("residual update").
+ * 4. Algorithm 3: after an exact solve whose states are inconsistent, the next configurations
+ *    are tried on C alone: their forces and slides predicted by a dense solve of C's active
+ *    block (the response of x to a change dc of the forces is (-F^-1 G_t dc, A_n^-1 G_n dc)),
+ *    flipped and tried again until one is consistent; only that one gets an exact solve (which
+ *    checks it again). So a flip costs a ~3q-sized dense factorization instead of a CG run.
+ *
+ * SI units; the stale factor and the predictions affect only how fast the solve converges and
+ * which configurations are tried, never the tolerance of the accepted solution. */
+#include "coupling_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* A solve needing more iterations than this refactors the tissue matrix at the next step:
+ * a factorization (~32 ms on the 13k-tet box, DESIGN.md) plus the cached columns costs about
+ * ten preconditioned iterations. */
+#define REFRESH_ITERATIONS 10
+/* Iterations of one exact solve before the stale factor is given up for a fresh one. */
+#define STALE_MAX_ITER 200
+
+struct CoupledSchur {
+    NsSolver *fac;  /* factor of a recent tissue matrix */
+    long fac_count; /* the factor the cache belongs to */
+    int n3;         /* tissue vector length of the factor */
+    int refresh;    /* refactor at the next step */
+    uint8_t *fixed; /* (n3) the tissue's fixed DOFs when it was factored */
+    /* Column cache: slot s holds F^-1 e_(3 node[s] + d), d = 0..2, at cols + (3 s + d) n3. */
+    int *slot, slot_cap; /* per tissue node: its slot, -1 */
+    int *node, count, cap;
+    double *cols;
+    /* Per step: needle compliance columns Zn (nr3 x 3q), C (3q x 3q), factor of an active
+     * block (3q x 3q), the PPCG vectors, scratch. */
+    double *buf;
+    size_t buf_cap;
+    double *Zn, *C, *L, *sc, *small;
+    int *act;
+    int na;
+    double *vec; /* 5 vectors of nt3 + nr3 */
+    size_t vec_cap;
+    int refreshed; /* refactored in this step */
+};
+
+CoupledSchur *coupled_schur_create(void)
+{
+    CoupledSchur *w = calloc(1, sizeof *w);
+    if (!w)
+        return NULL;
+    w->fac = ns_solver_create(NS_SOLVER_DIRECT);
+    if (!w->fac) {
+        free(w);
+        return NULL;
+    }
+    return w;
+}
+
+void coupled_schur_destroy(CoupledSchur *w)
+{
+    if (!w)
+        return;
+    ns_solver_destroy(w->fac);
+    free(w->slot);
+    free(w->node);
+    free(w->cols);
+    free(w->buf);
+    free(w->act);
+    free(w->vec);
+    free(w->fixed);
+    free(w);
+}
+
+/* ---- the tissue factor and its cached columns ---- */
+
+/* Node e (0 or 1) of coupling node k's tissue point and its weight (0: not a node of it). */
+static double point_node(const CoupledSystem *S, int k, int e, int *node)
+{
+    *node = e ? S->tb[k] : S->ta[k];
+    return e ? S->tw[k] : 1.0 - S->tw[k];
+}
+
+static void cache_clear(CoupledSchur *w)
+{
+    for (int s = 0; s < w->count; s++)
+        w->slot[w->node[s]] = -1;
+    w->count = 0;
+}
+
+static int refactor(CoupledSchur *w, const CoupledSystem *S, NsCouplingStats *st)
+{
+    cache_clear(w);
+    uint8_t *fx = realloc(w->fixed, (size_t)S->nt3 + 1);
+    if (!fx)
+        return -1;
+    w->fixed = fx;
+    if (ns_solver_factor(w->fac, S->At, S->tfixed))
+        return -1;
+    memcpy(w->fixed, S->tfixed, (size_t)S->nt3);
+    w->fac_count = ns_solver_factor_count(w->fac);
+    w->n3 = S->nt3;
+    w->refresh = 0;
+    st->refactors++;
+    return 0;
+}
+
+/* Makes sure every tissue node of the coupling nodes has its three columns: all missing ones in
+ * one multi-column solve. Columns of nodes no longer coupled are dropped when they pile up. */
+static int cache_fill(CoupledSchur *w, const CoupledSystem *S)
+{
+    int nn = S->nt3 / 3;
+    if (w->slot_cap < nn) {
+        int *p = realloc(w->slot, (size_t)nn * sizeof *p);
+        if (!p)
+            return -1;
+        for (int i = w->slot_cap; i < nn; i++)
+            p[i] = -1;
+        w->slot = p;
+        w->slot_cap = nn;
+    }
+    int need = 2 * S->q;
+    if (w->count > need + 64) /* a needle that moved on: forget the nodes it left */
+        cache_clear(w);
+    int *missing = malloc((size_t)(2 * S->q + 1) * sizeof *missing), nm = 0;
+    if (!missing)
+        return -1;
+    for (int k = 0; k < S->q; k++)
+        for (int e = 0; e < 2; e++) {
+            int a;
+            double wt = point_node(S, k, e, &a);
+            if (wt == 0.0 || w->slot[a] >= 0)
+                continue;
+            int dup = 0;
+            for (int i = 0; i < nm && !dup; i++)
+                dup = missing[i] == a;
+            if (!dup)
+                missing[nm++] = a;
+        }
+    int rc = 0;
+    if (nm > 0) {
+        int cap = w->count + nm;
+        if (cap > w->cap) {
+            cap = cap > 2 * w->cap ? cap : 2 * w->cap;
+            int *nd = realloc(w->node, (size_t)cap * sizeof *nd);
+            if (nd)
+                w->node = nd;
+            double *cl = realloc(w->cols, (size_t)cap * 3 * (size_t)S->nt3 * sizeof *cl);
+            if (cl)
+                w->cols = cl;
+            if (!nd || !cl)
+                rc = -1;
+            else
+                w->cap = cap;
+        }
+        double *B = rc ? NULL : calloc((size_t)nm * 3 * (size_t)S->nt3, sizeof *B);
+        if (!B)
+            rc = -1;
+        for (int i = 0; i < nm && rc == 0; i++)
+            for (int d = 0; d < 3; d++)
+                B[(size_t)(3 * i + d) * (size_t)S->nt3 + 3 * (size_t)missing[i] + d] = 1.0;
+        if (rc == 0 && ns_solver_apply(w->fac, S->nt3, 3 * nm, B,
+                                       w->cols + (size_t)w->count * 3 * (size_t)S->nt3))
+            rc = -1;
+        if (rc == 0)
+            for (int i = 0; i < nm; i++) {
+                w->node[w->count] = missing[i];
+                w->slot[missing[i]] = w->count++;
+            }
+        free(B);
+    }
+    free(missing);
+    return rc;
+}
+
+/* ---- the compliance C and its active block ---- */
+
+static int ensure_buf(CoupledSchur *w, const CoupledSystem *S)
+{
+    size_t q3 = 3 * (size_t)S->q, n = (size_t)(S->nt3 + S->nr3);
+    size_t need = (size_t)S->nr3 * q3 + 2 * q3 * q3 + n + 8 * q3 + 8;
+    if (need > w->buf_cap) {
+        double *b = realloc(w->buf, need * sizeof *b);
+        int *a = realloc(w->act, (q3 + 1) * sizeof *a);
+        if (b)
+            w->buf = b;
+        if (a)
+            w->act = a;
+        if (!b || !a)
+            return -1;
+        w->buf_cap = need;
+    }
+    w->Zn = w->buf;
+    w->C = w->Zn + (size_t)S->nr3 * q3;
+    w->L = w->C + q3 * q3;
+    w->sc = w->L + q3 * q3;
+    w->small = w->sc + n; /* 8 vectors of 3q */
+    if (5 * n > w->vec_cap) {
+        double *v = realloc(w->vec, 5 * n * sizeof *v);
+        if (!v)
+            return -1;
+        w->vec = v;
+        w->vec_cap = 5 * n;
+    }
+    return 0;
+}
+
+/* Local component j = 3k + col of the frame of coupling node k. */
+static const double *frame_col(const CoupledSystem *S, int j)
+{
+    return S->R + 9 * (j / 3) + 3 * (j % 3);
+}
+
+static int build_compliance(CoupledSchur *w, const CoupledSystem *S, double *nscratch)
+{
+    int q3 = 3 * S->q, nt3 = S->nt3, nr3 = S->nr3;
+    double *C = w->C;
+    memset(C, 0, (size_t)q3 * (size_t)q3 * sizeof *C);
+    /* Tissue: sum over the tissue point nodes a of k and b of l of w_a w_b R_k^T F^-1[a,b] R_l. */
+    for (int k = 0; k < S->q; k++)
+        for (int ea = 0; ea < 2; ea++) {
+            int a, b;
+            double wa = point_node(S, k, ea, &a);
+            if (wa == 0.0)
+                continue;
+            for (int l = 0; l < S->q; l++)
+                for (int eb = 0; eb < 2; eb++) {
+                    double wb = point_node(S, l, eb, &b);
+                    if (wb == 0.0)
+                        continue;
+                    const double *col = w->cols + (size_t)w->slot[b] * 3 * (size_t)nt3;
+                    double M[9]; /* M[3 i + d] = F^-1[3a + i, 3b + d] */
+                    for (int i = 0; i < 3; i++)
+                        for (int d = 0; d < 3; d++)
+                            M[3 * i + d] = col[(size_t)d * (size_t)nt3 + 3 * (size_t)a + i];
+                    for (int c1 = 0; c1 < 3; c1++) {
+                        const double *r1 = frame_col(S, 3 * k + c1);
+                        for (int c2 = 0; c2 < 3; c2++) {
+                            const double *r2 = frame_col(S, 3 * l + c2);
+                            double v = 0.0;
+                            for (int i = 0; i < 3; i++)
+                                for (int d = 0; d < 3; d++)
+                                    v += r1[i] * M[3 * i + d] * r2[d];
+                            C[(size_t)(3 * k + c1) * (size_t)q3 + 3 * l + c2] += wa * wb * v;
+                        }
+                    }
+                }
+        }
+    /* Needle: Zn column j = A_n^-1 (R_l col at node idx_l), exact band solves. */
+    for (int j = 0; j < q3; j++) {
+        double *z = w->Zn + (size_t)j * (size_t)nr3;
+        memset(nscratch, 0, (size_t)nr3 * sizeof *nscratch);
+        memset(z, 0, (size_t)nr3 * sizeof *z);
+        const double *r = frame_col(S, j);
+        for (int i = 0; i < 3; i++)
+            nscratch[3 * S->idx[j / 3] + i] = r[i];
+        if (ns_banded_solve(S->Ar, S->rfixed, nscratch, z, NULL))
+            return -1;
+        for (int k = 0; k < S->q; k++)
+            for (int c1 = 0; c1 < 3; c1++) {
+                const double *r1 = frame_col(S, 3 * k + c1);
+                const double *zk = z + 3 * S->idx[k];
+                C[(size_t)(3 * k + c1) * (size_t)q3 + j] +=
+                    r1[0] * zk[0] + r1[1] * zk[1] + r1[2] * zk[2];
+            }
+    }
+    return 0;
+}
+
+static int is_active(int s, int col)
+{
+    return col > 0 || s == NS_FRICTION_STATIC;
+}
+
+/* Cholesky of the active block of C for the states st into w->L (na x na). A block that is
+ * not numerically definite (a coupled node whose tissue and needle DOFs are both fixed) gets a
+ * tiny diagonal shift. */
+static int factor_active(CoupledSchur *w, const CoupledSystem *S, const uint8_t *st)
+{
+    int q3 = 3 * S->q, na = 0;
+    for (int j = 0; j < q3; j++)
+        if (is_active(st[j / 3], j % 3))
+            w->act[na++] = j;
+    w->na = na;
+    double dmax = 0.0;
+    for (int i = 0; i < na; i++)
+        dmax = fmax(dmax, w->C[(size_t)w->act[i] * (size_t)q3 + w->act[i]]);
+    for (double shift = 0.0;
+         shift<1e-4 * dmax + 1e-300; shift = shift> 0 ? 100 * shift : 1e-14 * dmax) {
+        double *L = w->L;
+        int ok = 1;
+        for (int i = 0; i < na && ok; i++)
+            for (int j = 0; j <= i && ok; j++) {
+                double s =
+                    w->C[(size_t)w->act[i] * (size_t)q3 + w->act[j]] + (i == j ? shift : 0.0);
+                for (int k = 0; k < j; k++)
+                    s -= L[(size_t)i * (size_t)na + k] * L[(size_t)j * (size_t)na + k];
+                if (i == j) {
+                    ok = s > 0.0;
+                    L[(size_t)i * (size_t)na + i] = ok ? sqrt(s) : 0.0;
+                } else {
+                    L[(size_t)i * (size_t)na + j] = s / L[(size_t)j * (size_t)na + j];
+                }
+            }
+        if (ok)
+            return 0;
+        if (dmax == 0.0)
+            break;
+    }
+    return -1;
+}
+
+/* Solves the active block: y (na) in place. */
+static void solve_active(const CoupledSchur *w, double *y)
+{
+    int na = w->na;
+    const double *L = w->L;
+    for (int i = 0; i < na; i++) {
+        double s = y[i];
+        for (int k = 0; k < i; k++)
+            s -= L[(size_t)i * (size_t)na + k] * y[k];
+        y[i] = s / L[(size_t)i * (size_t)na + i];
+    }
+    for (int i = na - 1; i >= 0; i--) {
+        double s = y[i];
+        for (int k = i + 1; k < na; k++)
+            s -= L[(size_t)k * (size_t)na + i] * y[k];
+        y[i] = s / L[(size_t)i * (size_t)na + i];
+    }
+}
+
+/* ---- products with the pieces ---- */
+
+/* h (3q) = B x in the local frames: R_k^T (tissue point of xt - xn[idx_k]) for every
+ * component (the constraint rows' left-hand side, for active and inactive ones alike). */
+static void constraint_rows(const CoupledSystem *S, const double *xt, const double *xn, double *h)
+{
+    for (int k = 0; k < S->q; k++) {
+        double pt[3];
+        coupled_point(S, k, xt, pt);
+        for (int i = 0; i < 3; i++)
+            pt[i] -= xn[3 * S->idx[k] + i];
+        for (int col = 0; col < 3; col++) {
+            const double *r = S->R + 9 * k + 3 * col;
+            h[3 * k + col] = r[0] * pt[0] + r[1] * pt[1] + r[2] * pt[2];
+        }
+    }
+}
+
+/* (rt, rn) += s B^T lam = s (G_t lam, -G_n lam), lam over all 3q components. */
+static void add_bt(const CoupledSystem *S, const double *lam, double s, double *rt, double *rn)
+{
+    for (int k = 0; k < S->q; k++) {
+        double g[3] = {0, 0, 0};
+        for (int col = 0; col < 3; col++)
+            for (int i = 0; i < 3; i++)
+                g[i] += S->R[9 * k + 3 * col + i] * lam[3 * k + col];
+        double wt = S->tw[k];
+        for (int i = 0; i < 3; i++) {
+            rt[3 * S->ta[k] + i] += s * (1.0 - wt) * g[i];
+            rt[3 * S->tb[k] + i] += s * wt * g[i];
+            rn[3 * S->idx[k] + i] -= s * g[i];
+        }
+    }
+}
+
+/* The response to forces lam (3q, on the needle): xt -= F^-1 G_t lam, xn += A_n^-1 G_n lam. */
+static void add_response(const CoupledSchur *w, const CoupledSystem *S, const double *lam,
+                         double *xt, double *xn)
+{
+    int nt3 = S->nt3, nr3 = S->nr3;
+    for (int k = 0; k < S->q; k++) {
+        double g[3] = {0, 0, 0};
+        for (int col = 0; col < 3; col++)
+            for (int i = 0; i < 3; i++)
+                g[i] += S->R[9 * k + 3 * col + i] * lam[3 * k + col];
+        if (g[0] == 0.0 && g[1] == 0.0 && g[2] == 0.0)
+            continue;
+        for (int e = 0; e < 2; e++) {
+            int a;
+            double wt = point_node(S, k, e, &a);
+            if (wt == 0.0)
+                continue;
+            const double *col = w->cols + (size_t)w->slot[a] * 3 * (size_t)nt3;
+            for (int d = 0; d < 3; d++) {
+                double s = wt * g[d];
+                const double *cd = col + (size_t)d * (size_t)nt3;
+                for (int i = 0; i < nt3; i++)
+                    xt[i] -= s * cd[i];
+            }
+        }
+    }
+    for (int j = 0; j < 3 * S->q; j++) {
+        if (lam[j] == 0.0)
+            continue;
+        const double *z = w->Zn + (size_t)j * (size_t)nr3;
+        for (int i = 0; i < nr3; i++)
+            xn[i] += lam[j] * z[i];
+    }
+}
+
+/* out = H x on the free rows (fixed rows 0). */
+static void hmul(const CoupledSystem *S, const double *x, double *out)
+{
+    ns_bsm_mul_threads(S->At, x, out, S->threads);
+    ns_banded_mul(S->Ar, x + S->nt3, out + S->nt3);
+    for (int i = 0; i < S->nt3; i++)
+        if (S->tfixed[i])
+            out[i] = 0.0;
+    for (int i = 0; i < S->nr3; i++)
+        if (S->rfixed[i])
+            out[S->nt3 + i] = 0.0;
+}
+
+static void mask_fixed(const CoupledSystem *S, double *v)
+{
+    for (int i = 0; i < S->nt3; i++)
+        if (S->tfixed[i])
+            v[i] = 0.0;
+    for (int i = 0; i < S->nr3; i++)
+        if (S->rfixed[i])
+            v[S->nt3 + i] = 0.0;
+}
+
+static double sdot(const double *a, const double *b, int n)
+{
+    double s = 0.0;
+    for (int i = 0; i < n; i++)
+        s += a[i] * b[i];
+    return s;
+}
+
+/* Multipliers lam (3q, 0 on inactive components) with C_aa lam_a = rhs_a. */
+static void active_solve(const CoupledSchur *w, const CoupledSystem *S, const double *rhs,
+                         double *lam, double *tmp)
+{
+    for (int i = 0; i < w->na; i++)
+        tmp[i] = rhs[w->act[i]];
+    solve_active(w, tmp);
+    memset(lam, 0, 3 * (size_t)S->q * sizeof *lam);
+    for (int i = 0; i < w->na; i++)
+        lam[w->act[i]] = tmp[i];
+}
+
+/* The projection: g = the preconditioned residual in the constraints' null space, v its
+ * multipliers, [F~ B^T; B 0] [g; v] = [r; 0] (F~ = diag(F, A_n) for the active rows). */
+static int project(const CoupledSchur *w, const CoupledSystem *S, const double *r, double *g,
+                   double *v, double *h, double *tmp)
+{
+    int nt3 = S->nt3;
+    if (ns_solver_apply(w->fac, nt3, 1, r, g))
+        return -1;
+    memset(g + nt3, 0, (size_t)S->nr3 * sizeof *g);
+    if (ns_banded_solve(S->Ar, S->rfixed, r + nt3, g + nt3, NULL))
+        return -1;
+    constraint_rows(S, g, g + nt3, h);
+    active_solve(w, S, h, v, tmp);
+    add_response(w, S, v, g, g + nt3);
+    return 0;
+}
+
+/* The exact solve for the states S->st (w->L factored for them) by projected PCG, from the
+ * accelerations in S->at / S->ar. With next given, the states are checked (Eq. 9-11) when the
+ * residual first reaches tol_check, within the same run: a violation stops it there, with
+ * *violations set and next holding the flips (so the check costs no restart, unlike the paper
+ * solver's two solves). Returns 0 (S->converged says whether it reached tol), 1 if the stale
+ * factor made it give up, -1 on failure. */
+static void forces_from(const CoupledSystem *S, const double *acc)
+{
+    for (int k = 0; k < S->q; k++)
+        for (int col = 0; col < 3; col++)
+            S->cf[3 * k + col] =
+                is_active(S->st[k], col) ? -acc[3 * k + col] : coupled_known_force(S, k, S->st[k]);
+}
+
+static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol, int max_iter,
+                int *iterations, uint8_t *next, int *violations)
+{
+    int nt3 = S->nt3, n = S->nt3 + S->nr3, q3 = 3 * S->q;
+    double *b = w->vec, *r = b + n, *g = r + n, *p = g + n, *hp = p + n;
+    double *lam = w->small, *acc = lam + q3, *h = acc + q3, *tmp = h + q3;
+    double *xt = S->at, *xn = S->ar;
+    /* x as one vector: tissue then needle (S->at and S->ar are separate arrays). */
+#define X_GET(out)                                                                                 \
+    do {                                                                                           \
+        memcpy(out, xt, (size_t)nt3 * sizeof *out);                                                \
+        memcpy(out + nt3, xn, (size_t)S->nr3 * sizeof *out);                                       \
+    } while (0)
+    /* The right-hand side with the known dynamic friction. */
+    memcpy(b, S->bt, (size_t)nt3 * sizeof *b);
+    memcpy(b + nt3, S->br, (size_t)S->nr3 * sizeof *b);
+    memset(lam, 0, (size_t)q3 * sizeof *lam);
+    for (int k = 0; k < S->q; k++)
+        if (!is_active(S->st[k], 0))
+            lam[3 * k] = coupled_known_force(S, k, S->st[k]);
+    add_bt(S, lam, -1.0, b, b + nt3);
+    /* Reference norm: b - H x_fixed, scaled (as coupled_paper.c's). */
+    X_GET(p);
+    for (int i = 0; i < nt3; i++)
+        if (!S->tfixed[i])
+            p[i] = 0.0;
+    for (int i = 0; i < S->nr3; i++)
+        if (!S->rfixed[i])
+            p[nt3 + i] = 0.0;
+    hmul(S, p, hp);
+    double bnorm = 0.0;
+    for (int i = 0; i < n; i++) {
+        int fixed = i < nt3 ? S->tfixed[i] : S->rfixed[i - nt3];
+        if (!fixed)
+            bnorm += (w->sc[i] * (b[i] - hp[i])) * (w->sc[i] * (b[i] - hp[i]));
+    }
+    bnorm = sqrt(bnorm);
+    /* A feasible start: the warm start moved onto the constraints (B x = e on active rows). */
+    constraint_rows(S, xt, xn, h);
+    for (int j = 0; j < q3; j++)
+        h[j] -= S->e[j];
+    active_solve(w, S, h, lam, tmp);
+    add_response(w, S, lam, xt, xn);
+    /* r = H x - b, projected; the multipliers accumulate in acc (c = -acc). */
+    X_GET(p);
+    hmul(S, p, r);
+    for (int i = 0; i < n; i++)
+        r[i] -= b[i];
+    mask_fixed(S, r);
+    memset(acc, 0, (size_t)q3 * sizeof *acc);
+    if (project(w, S, r, g, lam, h, tmp))
+        return -1;
+    add_bt(S, lam, -1.0, r, r + nt3);
+    mask_fixed(S, r);
+    for (int j = 0; j < q3; j++)
+        acc[j] += lam[j];
+    double rg = sdot(r, g, n);
+    for (int i = 0; i < n; i++)
+        p[i] = -g[i];
+    int it = 0, cap = max_iter < STALE_MAX_ITER ? max_iter : STALE_MAX_ITER;
+    double rn2 = 0.0;
+    for (int i = 0; i < n; i++)
+        rn2 += (w->sc[i] * r[i]) * (w->sc[i] * r[i]);
+    int checked = next == NULL;
+    if (violations)
+        *violations = 0;
+    while (bnorm > 0.0 && it < cap) {
+        if (!checked && sqrt(rn2) <= tol_check * bnorm) {
+            checked = 1;
+            forces_from(S, acc);
+            if ((*violations = coupled_check(S, S->st, S->cf, S->at, S->ar, next)) > 0)
+                break;
+        }
+        if (sqrt(rn2) <= tol * bnorm)
+            break;
+        hmul(S, p, hp);
+        double php = sdot(p, hp, n);
+        if (!(php > 0.0))
+            break;
+        double alpha = rg / php;
+        for (int i = 0; i < nt3; i++)
+            xt[i] += alpha * p[i];
+        for (int i = 0; i < S->nr3; i++)
+            xn[i] += alpha * p[nt3 + i];
+        for (int i = 0; i < n; i++)
+            r[i] += alpha * hp[i];
+        if (project(w, S, r, g, lam, h, tmp))
+            return -1;
+        add_bt(S, lam, -1.0, r, r + nt3);
+        mask_fixed(S, r);
+        for (int j = 0; j < q3; j++)
+            acc[j] += lam[j];
+        double rg2 = sdot(r, g, n), beta = rg2 / rg;
+        rg = rg2;
+        for (int i = 0; i < n; i++)
+            p[i] = -g[i] + beta * p[i];
+        rn2 = 0.0;
+        for (int i = 0; i < n; i++)
+            rn2 += (w->sc[i] * r[i]) * (w->sc[i] * r[i]);
+        it++;
+    }
+#undef X_GET
+    *iterations += it;
+    S->converged = bnorm == 0.0 || sqrt(rn2) <= tol * bnorm;
+    if (it > REFRESH_ITERATIONS)
+        w->refresh = 1;
+    forces_from(S, acc);
+    if (violations && *violations > 0)
+        return 0;
+    return S->converged || it < cap ? 0 : 1;
+}
+
+/* Refactor now (the stale factor failed): the cache and C follow. */
+static int refresh_now(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st, double *nscratch)
+{
+    if (refactor(w, S, st) || cache_fill(w, S) || build_compliance(w, S, nscratch))
+        return -1;
+    w->refreshed = 1;
+    return factor_active(w, S, S->st);
+}
+
+/* An exact solve of the states S->st to tol (checked at tol_check if next is given, see
+ * ppcg); a stale factor that fails gets refreshed once per step and the solve repeated. */
+static int solve_exact(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
+                       uint8_t *next, int *violations, NsCouplingStats *st, double *nscratch)
+{
+    int max_iter = S->c->params.max_iter;
+    int rc = ppcg(w, S, tol_check, tol, max_iter, &st->iterations, next, violations);
+    if (rc == 1 && !w->refreshed) {
+        if (refresh_now(w, S, st, nscratch))
+            return -1;
+        rc = ppcg(w, S, tol_check, tol, max_iter, &st->iterations, next, violations);
+    }
+    return rc < 0 ? -1 : 0;
+}
+
+/* Predicts, on C alone, the forces c2 and constraint residuals h2 of the states S->st (w->L
+ * factored for them) from an exact solution's c1, h1: dc = c2 - c1 is the known friction's
+ * change on inactive components and solves C_aa dc_a = h1_a - C_ak dc_k on active ones;
+ * h2 = h1 - C dc. */
+static void predict(const CoupledSchur *w, const CoupledSystem *S, const double *c1,
+                    const double *h1, double *dc, double *c2, double *h2, double *tmp)
+{
+    int q3 = 3 * S->q;
+    double *rhs = h2; /* used as scratch first */
+    for (int j = 0; j < q3; j++) {
+        int k = j / 3;
+        dc[j] = is_active(S->st[k], j % 3) ? 0.0 : coupled_known_force(S, k, S->st[k]) - c1[j];
+    }
+    for (int j = 0; j < q3; j++) {
+        double s = h1[j];
+        for (int l = 0; l < q3; l++)
+            if (dc[l] != 0.0)
+                s -= w->C[(size_t)j * (size_t)q3 + l] * dc[l];
+        rhs[j] = s;
+    }
+    double *lam = c2; /* scratch */
+    active_solve(w, S, rhs, lam, tmp);
+    for (int j = 0; j < q3; j++)
+        if (is_active(S->st[j / 3], j % 3))
+            dc[j] = lam[j];
+    for (int j = 0; j < q3; j++) {
+        double s = h1[j];
+        for (int l = 0; l < q3; l++)
+            s -= w->C[(size_t)j * (size_t)q3 + l] * dc[l];
+        h2[j] = s;
+        c2[j] = c1[j] + dc[j];
+    }
+}
+
+/* c1, h1 of the current exact solution. */
+static void exact_base(const CoupledSystem *S, double *c1, double *h1)
+{
+    memcpy(c1, S->cf, 3 * (size_t)S->q * sizeof *c1);
+    constraint_rows(S, S->at, S->ar, h1);
+    for (int j = 0; j < 3 * S->q; j++)
+        h1[j] -= S->e[j];
+}
+
+int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
+{
+    const NsCouplingParams *prm = &S->c->params;
+    int q = S->q, q3 = 3 * q;
+    if (ensure_buf(w, S))
+        return -1;
+    double *c1 = w->small + 4 * (size_t)q3, *h1 = c1 + q3, *dc = h1 + q3, *c2 = dc + q3;
+    double *h2 = malloc((size_t)(2 * q3 + q + S->nr3 + 1) * sizeof *h2);
+    uint8_t *next = malloc((size_t)q + 1);
+    if (!h2 || !next) {
+        free(h2);
+        free(next);
+        return -1;
+    }
+    double *slide = h2 + q3, *ptmp = slide + q, *nscratch = ptmp + q3;
+    /* Scaling of the residual norm: as the paper solver's, a unit diagonal. */
+    for (int i = 0; i < S->nt3; i++) {
+        const double *blk = ns_bsm_find(S->At, i / 3, i / 3);
+        w->sc[i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
+    }
+    for (int i = 0; i < S->nr3; i++) {
+        const double *blk = ns_banded_block((NsBanded *)S->Ar, i / 3, i / 3);
+        w->sc[S->nt3 + i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
+    }
+    int rc = 0;
+    w->refreshed = 0;
+    if (w->fac_count == 0 || w->refresh || w->n3 != S->nt3 ||
+        ns_solver_factor_count(w->fac) != w->fac_count ||
+        memcmp(w->fixed, S->tfixed, (size_t)S->nt3) != 0) {
+        rc = refactor(w, S, st);
+        w->refreshed = rc == 0;
+    }
+    if (rc == 0 && (cache_fill(w, S) || build_compliance(w, S, nscratch)))
+        rc = -1;
+    TriedSet T = {0, 0, q, NULL};
+    int have_base = 0;
+    st->consistent = 0;
+    for (int trial = 0; trial < prm->max_trials && rc == 0; trial++) {
+        if (tried_add(&T, S->st) || factor_active(w, S, S->st)) {
+            rc = -1;
+            break;
+        }
+        st->trials++;
+        if (have_base) {
+            /* A flip: tried on C first; only a configuration consistent there is solved. */
+            predict(w, S, c1, h1, dc, c2, h2, ptmp);
+            for (int k = 0; k < q; k++)
+                slide[k] = S->bdt2 * h2[3 * k];
+            if (coupled_check_slides(S, S->st, c2, slide, next)) {
+                memcpy(S->st, next, (size_t)q);
+                tried_next(&T, S->st);
+                continue;
+            }
+            add_response(w, S, dc, S->at, S->ar); /* warm start: the prediction */
+        }
+        int bad = 0;
+        if (solve_exact(w, S, prm->tau_check, prm->tau_sol, next, &bad, st, nscratch)) {
+            rc = -1;
+            break;
+        }
+        exact_base(S, c1, h1);
+        have_base = 1;
+        if (bad == 0 && coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0) {
+            st->consistent = 1;
+            break;
+        }
+        memcpy(S->st, next, (size_t)q);
+        tried_next(&T, S->st);
+    }
+    if (rc == 0 && !st->consistent) {
+        /* Accept the last configuration (§3.6.1), solved exactly. */
+        if (factor_active(w, S, S->st))
+            rc = -1;
+        if (rc == 0 && have_base) {
+            predict(w, S, c1, h1, dc, c2, h2, ptmp);
+            add_response(w, S, dc, S->at, S->ar);
+        }
+        if (rc == 0 && solve_exact(w, S, prm->tau_sol, prm->tau_sol, NULL, NULL, st, nscratch))
+            rc = -1;
+    }
+    st->unconverged = rc == 0 && !S->converged;
+    free(T.cfg);
+    free(h2);
+    free(next);
+    return rc;
+}

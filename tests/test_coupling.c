@@ -1,0 +1,145 @@
+/* Tests of the coupled step (sim/coupling.c, coupled_paper.c, coupled_schur.c) beyond the
+ * validation cases (engine/validate_coupling.c): determinism and thread independence of both
+ * solvers, our solver's refactorization when asked, and the checks of ns_coupled_init. The
+ * scene: a 16 x 8 x 8 mm gel block with clamped sides, a held 18 G needle entering along the
+ * centre line with its tip 8 mm deep, cutting forward. */
+#include <stdlib.h>
+
+#include "coupling.h"
+#include "mesh_grid.h"
+#include "ns_test.h"
+
+typedef struct Scene {
+    NsMesh mesh;
+    NsTissue tissue;
+    NsRod rod;
+    NsCoupled cpl;
+} Scene;
+
+enum { NX = 8, NYZ = 4 };
+#define LEN   0.016
+#define WIDTH 0.008
+
+static void scene_free(Scene *s)
+{
+    ns_coupled_free(&s->cpl);
+    ns_rod_free(&s->rod);
+    ns_tissue_free(&s->tissue);
+    ns_mesh_free(&s->mesh);
+}
+
+/* Builds the scene up to the coupling's parameters; path_out gets the path (not yet taken). */
+static int scene_parts(Scene *s, double gamma_rod, int threads, NsNeedlePath *path_out)
+{
+    memset(s, 0, sizeof *s);
+    char err[256];
+    double lo[3] = {0.0, -0.5 * WIDTH, -0.5 * WIDTH}, hi[3] = {LEN, 0.5 * WIDTH, 0.5 * WIDTH};
+    ENSURE(ns_mesh_grid_box(&s->mesh, lo, hi, NX, NYZ, NYZ, 0, err, sizeof err) == 0);
+    NsTissueMaterial mat = {ns_fem_material(NS_MODEL_COROTATIONAL, 30e3, 0.45, 3.0, 3.0), 1000.0};
+    NsTissueParams tp = ns_default_tissue_params();
+    tp.gamma = 0.55;
+    tp.beta = 0.25 * 1.05 * 1.05;
+    tp.threads = threads;
+    ENSURE(ns_tissue_init(&s->tissue, &s->mesh, &mat, 1, &tp, err, sizeof err) == 0);
+    const NsMesh *M = &s->tissue.mesh;
+    for (int i = 0; i < M->node_slots; i++) {
+        const double *u = M->u + 3 * i;
+        if (fabs(fabs(u[1]) - 0.5 * WIDTH) < 1e-9 || fabs(fabs(u[2]) - 0.5 * WIDTH) < 1e-9)
+            for (int c = 0; c < 3; c++)
+                ns_tissue_fix_dof(&s->tissue, i, c, 1);
+    }
+    int path[NX + 1], tip = NX / 2, out = 4, n = out + 1 + tip + 1;
+    double x[3 * 16] = {0}, h = LEN / NX;
+    for (int i = 0; i <= NX; i++)
+        path[i] = i + (NX + 1) * (NYZ / 2 + (NYZ + 1) * (NYZ / 2));
+    for (int i = 0; i < n; i++)
+        x[3 * i] = (i - out - 1) * h;
+    double d1[3] = {0.0, 1.0, 0.0};
+    NsRodParams rp = ns_default_rod_params();
+    rp.gamma = gamma_rod;
+    rp.beta = 0.25 * (gamma_rod + 0.5) * (gamma_rod + 0.5);
+    ENSURE(ns_rod_init(&s->rod, x, n, d1, 2, &rp, err, sizeof err) == 0);
+    ENSURE(ns_needle_path_init(path_out, M, path, NX + 1, tip * h, err, sizeof err) == 0);
+    return 0;
+}
+
+static int scene_make(Scene *s, NsCoupledSolverKind solver, int threads)
+{
+    NsNeedlePath p;
+    ENSURE(scene_parts(s, 0.55, threads, &p) == 0);
+    NsCouplingParams cp = ns_default_coupling_params();
+    cp.f_perlen = 20.0;
+    cp.cut_force[0] = 0.05;
+    cp.solver = solver;
+    cp.threads = threads;
+    char err[256];
+    ENSURE(ns_coupled_init(&s->cpl, &s->tissue, &s->rod, &p, &cp, err, sizeof err) == 0);
+    return 0;
+}
+
+/* In at 10 mm/s, then out, 5 ms steps; returns the final state hash (0 on failure). */
+static uint64_t run(NsCoupledSolverKind solver, int threads, int *refactors)
+{
+    Scene s;
+    uint64_t h = 0;
+    if (scene_make(&s, solver, threads) == 0) {
+        int ok = 1;
+        *refactors = 0;
+        for (int k = 0; k < 60 && ok; k++) {
+            NsCouplingStats st;
+            s.rod.v_insert = k < 40 ? 0.01 : -0.01;
+            ok = ns_coupled_step(&s.cpl, 5e-3, NULL, NULL, &st) == 0 && st.consistent &&
+                 !st.unconverged;
+            *refactors += st.refactors;
+        }
+        h = ok ? ns_coupled_state_hash(&s.cpl) : 0;
+    }
+    scene_free(&s);
+    return h;
+}
+
+static int deterministic_for_any_threads(void)
+{
+    NsCoupledSolverKind kinds[2] = {NS_COUPLED_SCHUR, NS_COUPLED_PAPER};
+    for (int k = 0; k < 2; k++) {
+        int r1, r2, r3;
+        uint64_t h1 = run(kinds[k], 1, &r1), h2 = run(kinds[k], 1, &r2), h3 = run(kinds[k], 2, &r3);
+        printf("  %s: hash %016llx, tissue factorizations %d\n", ns_coupled_solver_name(kinds[k]),
+               (unsigned long long)h1, r1);
+        ENSURE(h1 != 0);
+        ENSURE(h1 == h2);
+        ENSURE(h1 == h3);
+        ENSURE(k == 1 || r1 >= 1); /* ours factors the tissue at least once */
+        ENSURE(k == 0 || r1 == 0); /* the paper's never */
+    }
+    return 0;
+}
+
+static int init_checks(void)
+{
+    Scene s;
+    NsNeedlePath p;
+    char err[256];
+    /* Tissue and needle with different Newmark parameters: refused, the path freed (ASan). */
+    ENSURE(scene_parts(&s, 0.5, 1, &p) == 0);
+    NsCouplingParams cp = ns_default_coupling_params();
+    ENSURE(ns_coupled_init(&s.cpl, &s.tissue, &s.rod, &p, &cp, err, sizeof err) == -1);
+    ENSURE(strstr(err, "Newmark") != NULL);
+    ENSURE(p.node == NULL);
+    scene_free(&s);
+    /* An unknown solver kind: refused. */
+    ENSURE(scene_parts(&s, 0.55, 1, &p) == 0);
+    cp.solver = (NsCoupledSolverKind)7;
+    ENSURE(ns_coupled_init(&s.cpl, &s.tissue, &s.rod, &p, &cp, err, sizeof err) == -1);
+    ENSURE(strstr(err, "solver") != NULL);
+    scene_free(&s);
+    /* Names. */
+    ENSURE(ns_coupled_solver_parse("schur") == NS_COUPLED_SCHUR);
+    ENSURE(ns_coupled_solver_parse("paper") == NS_COUPLED_PAPER);
+    ENSURE(ns_coupled_solver_parse("cg") == -1);
+    ENSURE(strcmp(ns_coupled_solver_name(NS_COUPLED_SCHUR), "schur") == 0);
+    return 0;
+}
+
+NS_TEST_MAIN({"deterministic_for_any_threads", deterministic_for_any_threads},
+             {"init_checks", init_checks})
