@@ -374,12 +374,14 @@ static int friction_reversal(NsValidateResult *r)
                 seq[n++] = c;
         }
         seq[n] = 0;
-        snprintf(r->metric, sizeof r->metric, "worst LCP trials at the reversal");
-        r->value = maxt;
-        r->reference = 10;
-        r->error = maxt;
-        r->tolerance = 10;
-        r->pass = strcmp(seq, "+S-") == 0 && maxt <= 10 && incons == 0;
+        /* The trial count stays within max_trials (10) by construction; what the bar asks is
+         * that Algorithm 3 resolves every step within them: no step left inconsistent. */
+        snprintf(r->metric, sizeof r->metric, "steps unresolved in 10 trials");
+        r->value = incons;
+        r->reference = 0;
+        r->error = incons;
+        r->tolerance = 0;
+        r->pass = strcmp(seq, "+S-") == 0 && incons == 0;
         ns_validate_detail(r,
                            "tip 12 mm deep, pushed in at 10 mm/s for 0.2 s, then pulled at 10 "
                            "mm/s, 2 ms steps: majority state sequence %s (+ DYNAMIC+, S STATIC, "

@@ -15,8 +15,8 @@
  *    through C's active block: every iterate meets the constraints, so CG runs on the
  *    constraints' null space, where H is definite, preconditioned by the stale factor; a few
  *    iterations per solve. The residual is the first block's, H x + B^T c - b, scaled as the
- *    paper solver's (unit diagonal) and relative to its right-hand side; c is the sum of the
- *    projections' multipliers ("residual update").
+ *    paper solver's (unit diagonal) and relative to its right-hand side; c is minus the sum of
+ *    the projections' multipliers ("residual update").
  * 4. Algorithm 3: after an exact solve whose states are inconsistent, the next configurations
  *    are tried on C alone: their forces and slides predicted by a dense solve of C's active
  *    block (the response of x to a change dc of the forces is (-F^-1 G_t dc, A_n^-1 G_n dc)),
@@ -48,6 +48,7 @@ struct CoupledSchur {
     int *slot, slot_cap; /* per tissue node: its slot, -1 */
     int *node, count, cap;
     double *cols;
+    size_t cols_cap; /* doubles allocated in cols */
     /* Per step: needle compliance columns Zn (nr3 x 3q), C (3q x 3q), factor of an active
      * block (3q x 3q), the PPCG vectors, scratch. */
     double *buf;
@@ -55,6 +56,7 @@ struct CoupledSchur {
     double *Zn, *C, *L, *sc, *small;
     int *act;
     int na;
+    int act_cap;
     double *vec; /* 5 vectors of nt3 + nr3 */
     size_t vec_cap;
     int refreshed; /* refactored in this step */
@@ -111,8 +113,10 @@ static int refactor(CoupledSchur *w, const CoupledSystem *S, NsCouplingStats *st
     if (!fx)
         return -1;
     w->fixed = fx;
-    if (ns_solver_factor(w->fac, S->At, S->tfixed))
+    if (ns_solver_factor(w->fac, S->At, S->tfixed)) {
+        w->fac_count = 0; /* no factor now: the next step must make one */
         return -1;
+    }
     memcpy(w->fixed, S->tfixed, (size_t)S->nt3);
     w->fac_count = ns_solver_factor_count(w->fac);
     w->n3 = S->nt3;
@@ -153,23 +157,32 @@ static int cache_fill(CoupledSchur *w, const CoupledSystem *S)
             if (!dup)
                 missing[nm++] = a;
         }
-    int rc = 0;
     if (nm > 0) {
         int cap = w->count + nm;
         if (cap > w->cap) {
             cap = cap > 2 * w->cap ? cap : 2 * w->cap;
             int *nd = realloc(w->node, (size_t)cap * sizeof *nd);
-            if (nd)
-                w->node = nd;
-            double *cl = realloc(w->cols, (size_t)cap * 3 * (size_t)S->nt3 * sizeof *cl);
-            if (cl)
-                w->cols = cl;
-            if (!nd || !cl)
-                rc = -1;
-            else
-                w->cap = cap;
+            if (!nd) {
+                free(missing);
+                return -1;
+            }
+            w->node = nd;
+            w->cap = cap;
         }
-        double *B = rc ? NULL : calloc((size_t)nm * 3 * (size_t)S->nt3, sizeof *B);
+        /* The stride is the tissue's vector length, which may have changed since the last
+         * fill (a refactor cleared the cache then). */
+        size_t need_d = (size_t)w->cap * 3 * (size_t)S->nt3;
+        if (need_d > w->cols_cap) {
+            double *cl = realloc(w->cols, need_d * sizeof *cl);
+            if (!cl) {
+                free(missing);
+                return -1;
+            }
+            w->cols = cl;
+            w->cols_cap = need_d;
+        }
+        int rc = 0;
+        double *B = calloc((size_t)nm * 3 * (size_t)S->nt3, sizeof *B);
         if (!B)
             rc = -1;
         for (int i = 0; i < nm && rc == 0; i++)
@@ -184,9 +197,13 @@ static int cache_fill(CoupledSchur *w, const CoupledSystem *S)
                 w->slot[missing[i]] = w->count++;
             }
         free(B);
+        if (rc) {
+            free(missing);
+            return -1;
+        }
     }
     free(missing);
-    return rc;
+    return 0;
 }
 
 /* ---- the compliance C and its active block ---- */
@@ -197,14 +214,17 @@ static int ensure_buf(CoupledSchur *w, const CoupledSystem *S)
     size_t need = (size_t)S->nr3 * q3 + 2 * q3 * q3 + n + 8 * q3 + 8;
     if (need > w->buf_cap) {
         double *b = realloc(w->buf, need * sizeof *b);
-        int *a = realloc(w->act, (q3 + 1) * sizeof *a);
-        if (b)
-            w->buf = b;
-        if (a)
-            w->act = a;
-        if (!b || !a)
+        if (!b)
             return -1;
+        w->buf = b;
         w->buf_cap = need;
+    }
+    if ((int)q3 + 1 > w->act_cap) {
+        int *a = realloc(w->act, (q3 + 1) * sizeof *a);
+        if (!a)
+            return -1;
+        w->act = a;
+        w->act_cap = (int)q3 + 1;
     }
     w->Zn = w->buf;
     w->C = w->Zn + (size_t)S->nr3 * q3;
@@ -289,8 +309,9 @@ static int is_active(int s, int col)
 }
 
 /* Cholesky of the active block of C for the states st into w->L (na x na). A block that is
- * not numerically definite (a coupled node whose tissue and needle DOFs are both fixed) gets a
- * tiny diagonal shift. */
+ * not numerically definite gets a tiny diagonal shift (then the constraints hold only to that
+ * shift's size); a zero block (every active direction fixed on both sides: nothing can move to
+ * meet the constraints) fails the step. */
 static int factor_active(CoupledSchur *w, const CoupledSystem *S, const uint8_t *st)
 {
     int q3 = 3 * S->q, na = 0;
@@ -747,6 +768,7 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
         }
         if (rc == 0 && solve_exact(w, S, prm->tau_sol, prm->tau_sol, NULL, NULL, st, nscratch))
             rc = -1;
+        st->consistent = rc == 0 && coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0;
     }
     st->unconverged = rc == 0 && !S->converged;
     free(T.cfg);

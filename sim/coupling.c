@@ -261,29 +261,33 @@ double coupled_rel_slide(const CoupledSystem *S, int k, const double *at, const 
 #define FORCE_SLACK 1e-3
 #define SLIDE_SLACK 1e-9
 
+/* Checks node k (Eq. 9-11) in state s with forces cf and relative slide (tissue minus needle);
+ * returns the state a flip would give (s itself where consistent). */
+static uint8_t check_node(const CoupledSystem *S, int k, uint8_t s, const double *cf, double slide)
+{
+    if (s == NS_FRICTION_STATIC) {
+        /* Eq. 9 / 10: the tangential force on the needle within the static threshold (the tip
+         * also holds back up to f_cut before it cuts). */
+        double c1 = cf[3 * k], hi = S->f[k], lo = -(S->f[k] + (k == S->tip ? S->f_cut : 0.0));
+        double slack = FORCE_SLACK * (S->f[k] + S->f_cut) + 1e-12;
+        if (c1 > hi + slack || c1 < lo - slack)
+            return c1 < 0.0 ? NS_FRICTION_DYN_POS : NS_FRICTION_DYN_NEG;
+    } else if (s != NS_FRICTION_FREE) {
+        /* Eq. 11: the needle slides in its state's direction (needle minus tissue along t). */
+        double sgn = s == NS_FRICTION_DYN_POS ? 1.0 : -1.0;
+        if (-sgn * slide < -SLIDE_SLACK)
+            return NS_FRICTION_STATIC;
+    }
+    return s;
+}
+
 int coupled_check_slides(const CoupledSystem *S, const uint8_t *st, const double *cf,
                          const double *slide, uint8_t *next)
 {
     int bad = 0;
     for (int k = 0; k < S->q; k++) {
-        next[k] = st[k];
-        if (st[k] == NS_FRICTION_STATIC) {
-            /* Eq. 9 / 10: the tangential force on the needle within the static threshold (the
-             * tip also holds back up to f_cut before it cuts). */
-            double c1 = cf[3 * k], hi = S->f[k], lo = -(S->f[k] + (k == S->tip ? S->f_cut : 0.0));
-            double slack = FORCE_SLACK * (S->f[k] + S->f_cut) + 1e-12;
-            if (c1 > hi + slack || c1 < lo - slack) {
-                next[k] = c1 < 0.0 ? NS_FRICTION_DYN_POS : NS_FRICTION_DYN_NEG;
-                bad++;
-            }
-        } else if (st[k] != NS_FRICTION_FREE) {
-            /* Eq. 11: the needle slides in its state's direction (needle minus tissue along t). */
-            double sgn = st[k] == NS_FRICTION_DYN_POS ? 1.0 : -1.0;
-            if (-sgn * slide[k] < -SLIDE_SLACK) {
-                next[k] = NS_FRICTION_STATIC;
-                bad++;
-            }
-        }
+        next[k] = check_node(S, k, st[k], cf, slide[k]);
+        bad += next[k] != st[k];
     }
     return bad;
 }
@@ -291,15 +295,12 @@ int coupled_check_slides(const CoupledSystem *S, const uint8_t *st, const double
 int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, const double *at,
                   const double *ar, uint8_t *next)
 {
-    double *slide = malloc((size_t)(S->q > 0 ? S->q : 1) * sizeof *slide);
-    if (!slide) { /* no memory: report every node inconsistent, unchanged */
-        memcpy(next, st, (size_t)S->q);
-        return S->q > 0 ? S->q : 1;
+    int bad = 0;
+    for (int k = 0; k < S->q; k++) {
+        double slide = st[k] == NS_FRICTION_STATIC ? 0.0 : coupled_rel_slide(S, k, at, ar);
+        next[k] = check_node(S, k, st[k], cf, slide);
+        bad += next[k] != st[k];
     }
-    for (int k = 0; k < S->q; k++)
-        slide[k] = coupled_rel_slide(S, k, at, ar);
-    int bad = coupled_check_slides(S, st, cf, slide, next);
-    free(slide);
     return bad;
 }
 
@@ -376,8 +377,10 @@ static int paper_lcp(CoupledSystem *S, NsCouplingStats *st)
         memcpy(S->st, next, (size_t)S->q);
         tried_next(&T, S->st);
     }
-    if (rc == 0 && !st->consistent) /* accept the last configuration (§3.6.1) */
+    if (rc == 0 && !st->consistent) { /* accept the last configuration (§3.6.1) */
         rc = coupled_paper_solve(S, p->tau_sol, p->max_iter, &st->iterations);
+        st->consistent = rc == 0 && coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0;
+    }
     st->unconverged = rc == 0 && !S->converged;
     free(next);
     free(T.cfg);
@@ -738,8 +741,13 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         for (int d = 0; d < 3; d++)
             S.cf[3 * k + d] = d == 0 ? coupled_known_force(&S, k, S.st[k]) : 0.0;
 
-    int rc = c->params.solver == NS_COUPLED_PAPER ? paper_lcp(&S, &st)
-                                                  : coupled_schur_lcp(c->schur, &S, &st);
+    if (c->params.solver == NS_COUPLED_SCHUR && !c->schur)
+        c->schur = coupled_schur_create(); /* the solver was switched after init */
+    int rc = -1;
+    if (c->params.solver == NS_COUPLED_PAPER)
+        rc = paper_lcp(&S, &st);
+    else if (c->schur)
+        rc = coupled_schur_lcp(c->schur, &S, &st);
     int finite = rc == 0;
     for (int i = 0; i < S.nt3 && finite; i++)
         finite = isfinite(S.at[i]);

@@ -1,6 +1,6 @@
 /* Tests of the coupled step (sim/coupling.c, coupled_paper.c, coupled_schur.c) beyond the
  * validation cases (engine/validate_coupling.c): determinism and thread independence of both
- * solvers, our solver's refactorization when asked, and the checks of ns_coupled_init. The
+ * solvers, switching solvers between steps, and the checks of ns_coupled_init. The
  * scene: a 16 x 8 x 8 mm gel block with clamped sides, a held 18 G needle entering along the
  * centre line with its tip 8 mm deep, cutting forward. */
 #include <stdlib.h>
@@ -115,6 +115,24 @@ static int deterministic_for_any_threads(void)
     return 0;
 }
 
+/* A coupling made with the paper's solver and switched to ours between steps (ours is then
+ * created on the first step that needs it): it steps, consistent. */
+static int switch_solver_between_steps(void)
+{
+    Scene s;
+    ENSURE(scene_make(&s, NS_COUPLED_PAPER, 1) == 0);
+    for (int k = 0; k < 10; k++) {
+        NsCouplingStats st;
+        s.cpl.params.solver = k < 5 ? NS_COUPLED_PAPER : NS_COUPLED_SCHUR;
+        s.rod.v_insert = 0.01;
+        ENSURE(ns_coupled_step(&s.cpl, 5e-3, NULL, NULL, &st) == 0);
+        ENSURE(st.consistent && !st.unconverged);
+        ENSURE((k < 5) == (st.refactors == 0) || k > 5);
+    }
+    scene_free(&s);
+    return 0;
+}
+
 static int init_checks(void)
 {
     Scene s;
@@ -142,4 +160,5 @@ static int init_checks(void)
 }
 
 NS_TEST_MAIN({"deterministic_for_any_threads", deterministic_for_any_threads},
+             {"switch_solver_between_steps", switch_solver_between_steps},
              {"init_checks", init_checks})
