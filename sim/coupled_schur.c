@@ -31,19 +31,16 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* A solve needing more iterations than this refactors the tissue matrix at the next step:
- * a factorization (~32 ms on the 13k-tet box, DESIGN.md) plus the cached columns costs about
- * ten preconditioned iterations. */
-#define REFRESH_ITERATIONS 10
 /* Iterations of one exact solve before the stale factor is given up for a fresh one. */
 #define STALE_MAX_ITER 200
 
 struct CoupledSchur {
-    NsSolver *fac;  /* factor of a recent tissue matrix */
-    long fac_count; /* the factor the cache belongs to */
-    int n3;         /* tissue vector length of the factor */
-    int refresh;    /* refactor at the next step */
-    uint8_t *fixed; /* (n3) the tissue's fixed DOFs when it was factored */
+    NsSolver *fac;   /* factor of a recent tissue matrix */
+    long fac_count;  /* the factor the cache belongs to */
+    int n3;          /* tissue vector length of the factor */
+    int refresh;     /* a solve was slow: schedule a refactorization at the end of the step */
+    int refresh_now; /* scheduling failed: refactor at the start of the next step */
+    uint8_t *fixed;  /* (n3) the tissue's fixed DOFs when it was factored */
     /* Column cache: slot s holds F^-1 e_(3 node[s] + d), d = 0..2, at cols + (3 s + d) n3. */
     int *slot, slot_cap; /* per tissue node: its slot, -1 */
     int *node, count, cap;
@@ -60,6 +57,11 @@ struct CoupledSchur {
     double *vec; /* 5 vectors of nt3 + nr3 */
     size_t vec_cap;
     int refreshed; /* refactored in this step */
+    /* A refactorization scheduled at the end of a step (on the second core with 2 threads) and
+     * adopted at the start of the next, with the columns of the nodes coupled then. */
+    int pending;
+    int *job_node, job_count, job_cap;
+    double *job_B, *job_Z;
 };
 
 CoupledSchur *coupled_schur_create(void)
@@ -79,7 +81,7 @@ void coupled_schur_destroy(CoupledSchur *w)
 {
     if (!w)
         return;
-    ns_solver_destroy(w->fac);
+    ns_solver_destroy(w->fac); /* waits for a scheduled refactorization */
     free(w->slot);
     free(w->node);
     free(w->cols);
@@ -87,6 +89,9 @@ void coupled_schur_destroy(CoupledSchur *w)
     free(w->act);
     free(w->vec);
     free(w->fixed);
+    free(w->job_node);
+    free(w->job_B);
+    free(w->job_Z);
     free(w);
 }
 
@@ -121,6 +126,7 @@ static int refactor(CoupledSchur *w, const CoupledSystem *S, NsCouplingStats *st
     w->fac_count = ns_solver_factor_count(w->fac);
     w->n3 = S->nt3;
     w->refresh = 0;
+    w->refresh_now = 0;
     st->refactors++;
     return 0;
 }
@@ -204,6 +210,83 @@ static int cache_fill(CoupledSchur *w, const CoupledSystem *S)
     }
     free(missing);
     return 0;
+}
+
+/* Schedules the refactorization of this step's tissue matrix, with the columns of the tissue
+ * nodes coupled now, for adoption at the next step (ns_solver_factor_async: in the background
+ * with 2 threads, here with 1; the same factor either way). Returns 0, or -1 (nothing
+ * scheduled). */
+static int schedule_refresh(CoupledSchur *w, const CoupledSystem *S)
+{
+    int cap = 2 * S->q, nt3 = S->nt3, m = 0;
+    if (cap > w->job_cap) {
+        int *nd = realloc(w->job_node, (size_t)cap * sizeof *nd);
+        if (!nd)
+            return -1;
+        w->job_node = nd;
+        w->job_cap = cap;
+    }
+    for (int k = 0; k < S->q; k++)
+        for (int e = 0; e < 2; e++) {
+            int a, dup = 0;
+            if (point_node(S, k, e, &a) == 0.0)
+                continue;
+            for (int i = 0; i < m && !dup; i++)
+                dup = w->job_node[i] == a;
+            if (!dup)
+                w->job_node[m++] = a;
+        }
+    free(w->job_B);
+    free(w->job_Z);
+    w->job_B = calloc((size_t)m * 3 * (size_t)nt3 + 1, sizeof *w->job_B);
+    w->job_Z = malloc(((size_t)m * 3 * (size_t)nt3 + 1) * sizeof *w->job_Z);
+    if (!w->job_B || !w->job_Z)
+        return -1;
+    for (int i = 0; i < m; i++)
+        for (int d = 0; d < 3; d++)
+            w->job_B[(size_t)(3 * i + d) * (size_t)nt3 + 3 * (size_t)w->job_node[i] + d] = 1.0;
+    w->job_count = m;
+    if (ns_solver_factor_async(w->fac, S->At, S->tfixed, 3 * m, w->job_B, w->job_Z))
+        return -1;
+    w->pending = 1;
+    return 0;
+}
+
+/* Adopts the scheduled factor and its columns (the cache starts from them). Returns 1 if a new
+ * factor is in use, 0 if not, -1 on failure. */
+static int adopt_refresh(CoupledSchur *w, const CoupledSystem *S)
+{
+    int cols_ok = 0;
+    w->pending = 0;
+    if (!ns_solver_factor_adopt(w->fac, &cols_ok))
+        return 0;
+    cache_clear(w);
+    w->fac_count = ns_solver_factor_count(w->fac);
+    if (!cols_ok || w->job_count == 0 || S->nt3 != w->n3)
+        return 1; /* the columns are filled as needed */
+    size_t need_d = (size_t)w->job_count * 3 * (size_t)S->nt3;
+    if (w->job_count > w->cap) {
+        int *nd = realloc(w->node, (size_t)w->job_count * sizeof *nd);
+        if (!nd)
+            return -1;
+        w->node = nd;
+        w->cap = w->job_count;
+    }
+    if ((size_t)w->cap * 3 * (size_t)S->nt3 > w->cols_cap) {
+        size_t nd_ = (size_t)w->cap * 3 * (size_t)S->nt3;
+        double *cl = realloc(w->cols, nd_ * sizeof *cl);
+        if (!cl)
+            return -1;
+        w->cols = cl;
+        w->cols_cap = nd_;
+    }
+    memcpy(w->cols, w->job_Z, need_d * sizeof *w->cols);
+    for (int i = 0; i < w->job_count; i++) {
+        w->node[i] = w->job_node[i];
+        w->slot[w->job_node[i]] = i;
+    }
+    w->count = w->job_count;
+    return 1;
 }
 
 /* ---- the compliance C and its active block ---- */
@@ -614,7 +697,7 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
 #undef X_GET
     *iterations += it;
     S->converged = bnorm == 0.0 || sqrt(rn2) <= tol * bnorm;
-    if (it > REFRESH_ITERATIONS)
+    if (it > S->c->params.refresh_iterations)
         w->refresh = 1;
     forces_from(S, acc);
     if (violations && *violations > 0)
@@ -715,9 +798,16 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
     }
     int rc = 0;
     w->refreshed = 0;
-    if (w->fac_count == 0 || w->refresh || w->n3 != S->nt3 ||
-        ns_solver_factor_count(w->fac) != w->fac_count ||
-        memcmp(w->fixed, S->tfixed, (size_t)S->nt3) != 0) {
+    ns_solver_set_threads(w->fac, S->threads);
+    if (w->pending) {
+        int ad = adopt_refresh(w, S);
+        if (ad < 0)
+            rc = -1;
+        st->refactors += ad > 0;
+    }
+    if (rc == 0 && (w->fac_count == 0 || w->refresh_now || w->n3 != S->nt3 ||
+                    ns_solver_factor_count(w->fac) != w->fac_count ||
+                    memcmp(w->fixed, S->tfixed, (size_t)S->nt3) != 0)) {
         rc = refactor(w, S, st);
         w->refreshed = rc == 0;
     }
@@ -771,6 +861,10 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
         st->consistent = rc == 0 && coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0;
     }
     st->unconverged = rc == 0 && !S->converged;
+    if (rc == 0 && w->refresh && !w->pending) {
+        w->refresh = 0;
+        w->refresh_now = schedule_refresh(w, S) != 0;
+    }
     free(T.cfg);
     free(h2);
     free(next);

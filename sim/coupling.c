@@ -43,6 +43,7 @@ NsCouplingParams ns_default_coupling_params(void)
     p.max_iter = 5000;
     p.solver = NS_COUPLED_SCHUR;
     p.threads = 1;
+    p.refresh_iterations = 10;
     return p;
 }
 
@@ -148,10 +149,11 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     const NsCouplingParams *q = &c->params;
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
+        q->refresh_iterations < 0 ||
         (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
-                 "max_trials and max_iter >= 1, solver schur or paper");
+                 "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper");
         ns_needle_path_free(path); /* taken over, even on failure */
         return -1;
     }

@@ -72,7 +72,12 @@ typedef struct NsCouplingParams {
     int max_trials;                            /* friction configurations tried per step (10) */
     int max_iter;                              /* iterations per linear solve */
     NsCoupledSolverKind solver;
-    int threads; /* for the SpMV and vector loops; results do not depend on it */
+    int threads; /* for the SpMV and vector loops and (schur) a background refactorization;
+                    results do not depend on it */
+    /* schur: a solve needing more iterations than this schedules a refactorization of the
+     * tissue matrix, adopted at the next step (10: a factorization and its columns cost about
+     * ten iterations; lower pays only with a second core, docs/coupling.md) */
+    int refresh_iterations;
 } NsCouplingParams;
 
 NsCouplingParams ns_default_coupling_params(void);

@@ -56,6 +56,13 @@ typedef struct RefreshJob {
     cholmod_factor *symbolic; /* the solver's Lsym, read-only while the job exists */
     cholmod_factor *L; /* in: a numeric factor to overwrite, or NULL; out: the factor, or NULL
                           if the factorization failed */
+    /* ns_solver_factor_async's columns: Z = A^-1 B with the new factor (ncols of n3 each, dof
+     * the free numbering of that matrix, the job's own copy); cols_ok is set when they were. */
+    int ncols, n3, cols_ok;
+    const double *B;
+    double *Z;
+    int *dof;
+    int dof_cap;
 } RefreshJob;
 
 struct NsSolver {
@@ -225,6 +232,7 @@ void ns_solver_destroy(NsSolver *s)
         cholmod_finish(&s->cm);
     }
     free(s->dof);
+    free(s->job.dof);
     free(s->work);
     free(s);
 }
@@ -384,6 +392,35 @@ static int factor_sync(NsSolver *s, const NsBlockMatrix *A, int nfree, uint64_t 
     return 0;
 }
 
+/* Z = A^-1 B for ncols columns of n3 entries with the factor L (free numbering dof, nfree
+ * free DOFs): fixed entries of B ignored, of Z set to 0. Returns 0 or -1. */
+static int solve_columns(cholmod_factor *L, cholmod_common *cm, const int *dof, int n3, int nfree,
+                         int ncols, const double *B, double *Z)
+{
+    cholmod_dense *Bd =
+        cholmod_allocate_dense((size_t)nfree, (size_t)ncols, (size_t)nfree, CHOLMOD_REAL, cm);
+    if (!Bd)
+        return -1;
+    double *bx = Bd->x;
+    for (int j = 0; j < ncols; j++)
+        for (int i = 0; i < n3; i++)
+            if (dof[i] >= 0)
+                bx[(size_t)j * (size_t)nfree + (size_t)dof[i]] = B[(size_t)j * (size_t)n3 + i];
+    OmpSerial o = omp_serial_begin();
+    cholmod_dense *X = cholmod_solve(CHOLMOD_A, L, Bd, cm);
+    omp_serial_end(o);
+    cholmod_free_dense(&Bd, cm);
+    if (!X)
+        return -1;
+    const double *xx = X->x;
+    for (int j = 0; j < ncols; j++)
+        for (int i = 0; i < n3; i++)
+            Z[(size_t)j * (size_t)n3 + i] =
+                dof[i] >= 0 ? xx[(size_t)j * (size_t)nfree + (size_t)dof[i]] : 0.0;
+    cholmod_free_dense(&X, cm);
+    return 0;
+}
+
 static void *job_main(void *arg)
 {
     RefreshJob *j = arg;
@@ -392,36 +429,50 @@ static void *job_main(void *arg)
         cholmod_free_factor(&L, &j->cm);
     cholmod_free_sparse(&j->M, &j->cm);
     j->L = L;
+    j->cols_ok = 0;
+    if (L && j->ncols > 0)
+        j->cols_ok = solve_columns(L, &j->cm, j->dof, j->n3, (int)L->n, j->ncols, j->B, j->Z) == 0;
     atomic_store_explicit(&j->done, 1, memory_order_release);
     return NULL;
 }
 
 /* Schedule the refactorization of A (this solve's matrix, whose pattern s->Lsym has): on a
  * worker thread with 2 or more threads, else right here; adopted refresh_lag solves later. */
-static void job_start(NsSolver *s, const NsBlockMatrix *A, int nfree, NsSolveStats *st)
+/* Starts the refactorization of A (free numbering dof, nfree free DOFs; the pattern of
+ * s->Lsym): on a worker thread with 2 or more threads, else right here. The caller has set the
+ * job's columns (ncols). Returns 0, or -1 (memory: nothing scheduled). */
+static int job_launch(NsSolver *s, const NsBlockMatrix *A, const int *dof, int nfree, long adopt_at)
 {
     RefreshJob *j = &s->job;
     if (!j->cm_started) {
         start_common(&j->cm);
         j->cm_started = 1;
     }
-    j->M = to_cholmod(A, s->dof, nfree, &j->cm);
+    j->M = to_cholmod(A, dof, nfree, &j->cm);
     if (!j->M)
-        return; /* out of memory: keep the stale factor */
+        return -1;
     j->symbolic = s->Lsym;
     j->L = s->spare;
     s->spare = NULL;
     j->pattern = s->pattern;
     j->nfree = s->nfree;
     j->made_at = s->solves;
-    j->adopt_at = s->solves + s->refresh_lag;
+    j->adopt_at = adopt_at;
+    j->cols_ok = 0;
     atomic_store_explicit(&j->done, 0, memory_order_relaxed);
     j->pending = 1;
-    st->refresh_started = 1;
     if (s->threads > 1 && pthread_create(&j->thread, NULL, job_main, j) == 0)
         j->running = 1;
     else
         job_main(j); /* the same factor, made now: results do not change */
+    return 0;
+}
+
+static void job_start(NsSolver *s, const NsBlockMatrix *A, int nfree, NsSolveStats *st)
+{
+    s->job.ncols = 0;
+    if (job_launch(s, A, s->dof, nfree, s->solves + s->refresh_lag) == 0)
+        st->refresh_started = 1; /* else out of memory: keep the stale factor */
 }
 
 /* Switch to the factor of the pending job (waiting for it), if it is for the current analysis
@@ -741,32 +792,55 @@ int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z)
         return 0;
     if (ncols == 1) /* one column: the solve's kept buffers */
         return apply_factor(s, n3, B, Z);
-    int nfree = s->nfree;
-    cholmod_dense *Bd =
-        cholmod_allocate_dense((size_t)nfree, (size_t)ncols, (size_t)nfree, CHOLMOD_REAL, &s->cm);
-    if (!Bd)
-        return -1;
-    double *bx = Bd->x;
-    for (int j = 0; j < ncols; j++)
-        for (int i = 0; i < n3; i++)
-            if (s->dof[i] >= 0)
-                bx[(size_t)j * (size_t)nfree + (size_t)s->dof[i]] = B[(size_t)j * (size_t)n3 + i];
-    OmpSerial o = omp_serial_begin();
-    cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, Bd, &s->cm);
-    omp_serial_end(o);
-    cholmod_free_dense(&Bd, &s->cm);
-    if (!X)
-        return -1;
-    const double *xx = X->x;
-    for (int j = 0; j < ncols; j++)
-        for (int i = 0; i < n3; i++)
-            Z[(size_t)j * (size_t)n3 + i] =
-                s->dof[i] >= 0 ? xx[(size_t)j * (size_t)nfree + (size_t)s->dof[i]] : 0.0;
-    cholmod_free_dense(&X, &s->cm);
-    return 0;
+    return solve_columns(s->L, &s->cm, s->dof, n3, s->nfree, ncols, B, Z);
 }
 
 long ns_solver_factor_count(const NsSolver *s)
 {
     return s ? s->factors : 0;
+}
+
+int ns_solver_factor_async(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed, int ncols,
+                           const double *B, double *Z)
+{
+    if (!s || (s->kind != NS_SOLVER_DIRECT && s->kind != NS_SOLVER_STALE_PCG) || !s->Lsym ||
+        ncols < 0)
+        return -1;
+    int n3 = 3 * A->n;
+    /* The same pattern and free DOFs as the analysis, or nothing to do in the background. */
+    int *dof = s->job.dof;
+    if (n3 > s->job.dof_cap) {
+        dof = realloc(s->job.dof, (size_t)n3 * sizeof *dof);
+        if (!dof)
+            return -1;
+        s->job.dof = dof;
+        s->job.dof_cap = n3;
+    }
+    job_cancel(s);
+    int nfree = 0;
+    for (int i = 0; i < n3; i++)
+        dof[i] = (dof_fixed && dof_fixed[i]) ? -1 : nfree++;
+    if (nfree != s->nfree || pattern_hash(A, dof) != s->pattern)
+        return -1;
+    RefreshJob *j = &s->job;
+    j->ncols = ncols;
+    j->n3 = n3;
+    j->B = B;
+    j->Z = Z;
+    return job_launch(s, A, dof, nfree, -1); /* -1: only ns_solver_factor_adopt adopts it */
+}
+
+int ns_solver_factor_adopt(NsSolver *s, int *cols_ok)
+{
+    *cols_ok = 0;
+    if (!s || !s->job.pending || s->job.adopt_at != -1)
+        return 0;
+    NsSolveStats st = {0};
+    job_join(s);
+    *cols_ok = s->job.L && s->job.ncols > 0 && s->job.cols_ok;
+    s->job.ncols = 0;
+    job_adopt(s, s->pattern, s->nfree, &st);
+    if (!st.refresh_adopted)
+        *cols_ok = 0;
+    return st.refresh_adopted;
 }

@@ -102,5 +102,17 @@ int ns_solver_factor(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fix
 int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z);
 /* Counts the factors made so far: it changes whenever the factor in use changes. */
 long ns_solver_factor_count(const NsSolver *s);
+/* Schedules a factorization of A (which must have the pattern and fixed DOFs of the factor in
+ * use) and, with ncols > 0, the columns Z = A^-1 B with it: on a background thread (its own
+ * CHOLMOD common) when the solver has 2 or more threads, else right here. The factor in use does
+ * not change until ns_solver_factor_adopt, so the results are the same either way. B and Z (ncols
+ * columns of 3n) must stay alive and untouched until then. A pending refactorization is dropped.
+ * Returns 0, or -1 (another pattern, no factor yet, memory: nothing scheduled). */
+int ns_solver_factor_async(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed,
+                           int ncols, const double *B, double *Z);
+/* Waits for the scheduled factorization and puts it in use. Returns 1 if it was adopted (then
+ * *cols_ok says whether its columns were computed), 0 if none was pending or it failed (the old
+ * factor stays). */
+int ns_solver_factor_adopt(NsSolver *s, int *cols_ok);
 
 #endif

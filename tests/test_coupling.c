@@ -63,7 +63,7 @@ static int scene_parts(Scene *s, double gamma_rod, int threads, NsNeedlePath *pa
     return 0;
 }
 
-static int scene_make(Scene *s, NsCoupledSolverKind solver, int threads)
+static int scene_make(Scene *s, NsCoupledSolverKind solver, int threads, int refresh)
 {
     NsNeedlePath p;
     ENSURE(scene_parts(s, 0.55, threads, &p) == 0);
@@ -72,17 +72,18 @@ static int scene_make(Scene *s, NsCoupledSolverKind solver, int threads)
     cp.cut_force[0] = 0.05;
     cp.solver = solver;
     cp.threads = threads;
+    cp.refresh_iterations = refresh;
     char err[256];
     ENSURE(ns_coupled_init(&s->cpl, &s->tissue, &s->rod, &p, &cp, err, sizeof err) == 0);
     return 0;
 }
 
 /* In at 10 mm/s, then out, 5 ms steps; returns the final state hash (0 on failure). */
-static uint64_t run(NsCoupledSolverKind solver, int threads, int *refactors)
+static uint64_t run(NsCoupledSolverKind solver, int threads, int refresh, int *refactors)
 {
     Scene s;
     uint64_t h = 0;
-    if (scene_make(&s, solver, threads) == 0) {
+    if (scene_make(&s, solver, threads, refresh) == 0) {
         int ok = 1;
         *refactors = 0;
         for (int k = 0; k < 60 && ok; k++) {
@@ -103,7 +104,8 @@ static int deterministic_for_any_threads(void)
     NsCoupledSolverKind kinds[2] = {NS_COUPLED_SCHUR, NS_COUPLED_PAPER};
     for (int k = 0; k < 2; k++) {
         int r1, r2, r3;
-        uint64_t h1 = run(kinds[k], 1, &r1), h2 = run(kinds[k], 1, &r2), h3 = run(kinds[k], 2, &r3);
+        uint64_t h1 = run(kinds[k], 1, 10, &r1), h2 = run(kinds[k], 1, 10, &r2),
+                 h3 = run(kinds[k], 2, 10, &r3);
         printf("  %s: hash %016llx, tissue factorizations %d\n", ns_coupled_solver_name(kinds[k]),
                (unsigned long long)h1, r1);
         ENSURE(h1 != 0);
@@ -115,12 +117,29 @@ static int deterministic_for_any_threads(void)
     return 0;
 }
 
+/* Refactorizations scheduled after every solve that needs more than one iteration: made in
+ * the background with 2 threads, here with 1, adopted at the next step either way, so the
+ * state is the same bit for bit. */
+static int background_refresh_is_deterministic(void)
+{
+    int r1, r2, r3;
+    uint64_t h1 = run(NS_COUPLED_SCHUR, 1, 1, &r1), h2 = run(NS_COUPLED_SCHUR, 2, 1, &r2);
+    uint64_t h3 = run(NS_COUPLED_SCHUR, 1, 10, &r3);
+    printf("  refresh after 1 iteration: %d factorizations, hash %016llx; after 10: %d\n", r1,
+           (unsigned long long)h1, r3);
+    ENSURE(h1 != 0 && h3 != 0);
+    ENSURE(h1 == h2);
+    ENSURE(r1 == r2);
+    ENSURE(r1 > r3 + 5); /* the background path was taken, many times */
+    return 0;
+}
+
 /* A coupling made with the paper's solver and switched to ours between steps (ours is then
  * created on the first step that needs it): it steps, consistent. */
 static int switch_solver_between_steps(void)
 {
     Scene s;
-    ENSURE(scene_make(&s, NS_COUPLED_PAPER, 1) == 0);
+    ENSURE(scene_make(&s, NS_COUPLED_PAPER, 1, 10) == 0);
     for (int k = 0; k < 10; k++) {
         NsCouplingStats st;
         s.cpl.params.solver = k < 5 ? NS_COUPLED_PAPER : NS_COUPLED_SCHUR;
@@ -160,5 +179,6 @@ static int init_checks(void)
 }
 
 NS_TEST_MAIN({"deterministic_for_any_threads", deterministic_for_any_threads},
+             {"background_refresh_is_deterministic", background_refresh_is_deterministic},
              {"switch_solver_between_steps", switch_solver_between_steps},
              {"init_checks", init_checks})

@@ -423,6 +423,30 @@ static int factor_applied_to_columns(void)
         ENSURE(fabs(z1[i] - Z[n3 + i]) <= 1e-12 * (fabs(Z[n3 + i]) + 1e-30));
     ENSURE(ns_solver_factor(s, &A, fixed) == 0);
     ENSURE(ns_solver_factor_count(s) == 2);
+    /* Scheduled: another matrix of the same pattern factored with its columns (in the
+     * background with 2 threads), in use only once adopted. */
+    NsBlockMatrix A2;
+    grid_matrix(&A2, m, 2e3, 1.0);
+    double *Z2 = malloc((size_t)n3 * cols * sizeof *Z2), *Z3 = malloc((size_t)n3 * sizeof *Z3);
+    int ok = 0;
+    for (int th = 1; th <= 2; th++) {
+        ns_solver_set_threads(s, th);
+        long before = ns_solver_factor_count(s);
+        ENSURE(ns_solver_factor_async(s, &A2, fixed, cols, B, Z2) == 0);
+        ENSURE(ns_solver_apply(s, n3, 1, B + n3, Z3) == 0); /* still the old factor */
+        ENSURE(memcmp(Z3, z1, (size_t)n3 * sizeof *Z3) == 0);
+        ENSURE(ns_solver_factor_adopt(s, &ok) == 1 && ok);
+        ENSURE(ns_solver_factor_count(s) == before + 1);
+        ENSURE(ns_solver_factor_adopt(s, &ok) == 0); /* nothing pending */
+        ENSURE(ns_solver_apply(s, n3, 1, B + n3, Z3) == 0);
+        for (int i = 0; i < n3; i++)
+            ENSURE(fabs(Z3[i] - Z2[n3 + i]) <= 1e-12 * (fabs(Z2[n3 + i]) + 1e-30));
+        ENSURE(ns_solver_factor(s, &A, fixed) == 0); /* back to A for the next round */
+        ENSURE(ns_solver_apply(s, n3, 1, B + n3, z1) == 0);
+    }
+    ns_bsm_free(&A2);
+    free(Z2);
+    free(Z3);
     NsSolver *cg = ns_solver_create(NS_SOLVER_CG);
     ENSURE(ns_solver_factor(cg, &A, fixed) == -1); /* CG has no factor */
     ns_solver_destroy(cg);
