@@ -1,0 +1,786 @@
+/* Tissue remeshing at the needle tip (sim/remesh.h): point location, the snap and split
+ * operations with their undo stack, and Algorithm 2's choice among candidate operations by the
+ * lexicographic quality vector (paper §3.4.1). */
+#include "remesh.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "quality.h"
+
+/* ---- geometry ---- */
+
+/* Barycentric coordinates of p in tet t (material space). Returns 0, or -1 for a flat tet. */
+static int tet_bary(const NsMesh *m, int t, const double p[3], double b[4])
+{
+    const int *tn = m->tet_node + 4 * t;
+    const double *u0 = m->u + 3 * tn[0];
+    double A[9], r[3];
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++)
+            A[3 * i + j] = m->u[3 * tn[j + 1] + i] - u0[i];
+        r[i] = p[i] - u0[i];
+    }
+    double det = A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
+                 A[2] * (A[3] * A[7] - A[4] * A[6]);
+    if (!(fabs(det) > 0.0))
+        return -1;
+    /* Cramer's rule for A l = r. */
+    for (int c = 0; c < 3; c++) {
+        double M[9];
+        memcpy(M, A, sizeof M);
+        for (int i = 0; i < 3; i++)
+            M[3 * i + c] = r[i];
+        b[c + 1] = (M[0] * (M[4] * M[8] - M[5] * M[7]) - M[1] * (M[3] * M[8] - M[5] * M[6]) +
+                    M[2] * (M[3] * M[7] - M[4] * M[6])) /
+                   det;
+    }
+    b[0] = 1.0 - b[1] - b[2] - b[3];
+    return 0;
+}
+
+static double min4(const double b[4])
+{
+    return fmin(fmin(b[0], b[1]), fmin(b[2], b[3]));
+}
+
+int ns_mesh_locate(const NsMesh *m, const double p[3], int start, double tol, double bary[4])
+{
+    double b[4];
+    int t = start;
+    if (!ns_mesh_tet_alive(m, t))
+        for (t = 0; t < m->tet_slots && !ns_mesh_tet_alive(m, t); t++)
+            ;
+    /* Walk across the face opposite the most negative coordinate. */
+    for (int step = 0; step < 4 * m->tet_alive + 16 && ns_mesh_tet_alive(m, t); step++) {
+        if (tet_bary(m, t, p, b))
+            break;
+        int k = 0;
+        for (int i = 1; i < 4; i++)
+            if (b[i] < b[k])
+                k = i;
+        if (b[k] >= -tol) {
+            if (bary)
+                memcpy(bary, b, sizeof b);
+            return t;
+        }
+        t = m->tet_adj[4 * t + k];
+    }
+    /* The walk left the mesh (a concave boundary) or cycled: search them all. */
+    int best = -1;
+    double best_min = -INFINITY;
+    for (int e = 0; e < m->tet_slots; e++) {
+        if (!ns_mesh_tet_alive(m, e) || tet_bary(m, e, p, b))
+            continue;
+        if (min4(b) > best_min) {
+            best_min = min4(b);
+            best = e;
+            if (bary)
+                memcpy(bary, b, sizeof b);
+        }
+    }
+    return best_min >= -tol ? best : -1;
+}
+
+/* World state (x, v, a) at barycentric b of tet t. */
+static void interp_state(const NsMesh *m, int t, const double b[4], double x[3], double v[3],
+                         double a[3])
+{
+    for (int i = 0; i < 3; i++)
+        x[i] = v[i] = a[i] = 0.0;
+    for (int k = 0; k < 4; k++) {
+        int n = m->tet_node[4 * t + k];
+        for (int i = 0; i < 3; i++) {
+            x[i] += b[k] * m->x[3 * n + i];
+            v[i] += b[k] * m->v[3 * n + i];
+            a[i] += b[k] * m->a[3 * n + i];
+        }
+    }
+}
+
+static int tet_has(const NsMesh *m, int t, int n)
+{
+    const int *tn = m->tet_node + 4 * t;
+    return tn[0] == n || tn[1] == n || tn[2] == n || tn[3] == n;
+}
+
+static double tet_quality_of(const NsMesh *m, const int *tn)
+{
+    return ns_tet_quality(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2], m->u + 3 * tn[3]);
+}
+
+/* Worst material quality of the tets around node n. */
+static double node_min_quality(const NsMesh *m, int n)
+{
+    double q = INFINITY;
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++)
+        q = fmin(q, tet_quality_of(m, m->tet_node + 4 * l->items[i]));
+    return q;
+}
+
+/* Is node n on the boundary (on a face with no tet across)? */
+static int node_on_boundary(const NsMesh *m, int n)
+{
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++) {
+        int t = l->items[i];
+        for (int k = 0; k < 4; k++)
+            if (m->tet_adj[4 * t + k] < 0 && m->tet_node[4 * t + k] != n)
+                return 1; /* face k (opposite vertex k) holds n and is a boundary face */
+    }
+    return 0;
+}
+
+/* Are nodes a and b joined by an edge (in a common tet)? */
+static int connected(const NsMesh *m, int a, int b)
+{
+    if (a == b)
+        return 1;
+    const NsIntList *l = &m->node_tets[a];
+    for (int i = 0; i < l->count; i++)
+        if (tet_has(m, l->items[i], b))
+            return 1;
+    return 0;
+}
+
+/* ---- the stack and the operations ---- */
+
+void ns_remesh_stack_init(NsRemeshStack *s)
+{
+    memset(s, 0, sizeof *s);
+}
+
+void ns_remesh_stack_free(NsRemeshStack *s)
+{
+    for (int i = 0; i < s->count; i++) {
+        free(s->ops[i].removed_tet);
+        free(s->ops[i].added_tet);
+    }
+    free(s->ops);
+    free(s->snap_node);
+    free(s->snap_u);
+    memset(s, 0, sizeof *s);
+}
+
+/* Tets containing every node of the simplex, into out (cap); returns their count. */
+static int simplex_tets(const NsMesh *m, const int *simplex, int k, int *out, int cap)
+{
+    int n = 0;
+    const NsIntList *l = &m->node_tets[simplex[0]];
+    for (int i = 0; i < l->count; i++) {
+        int t = l->items[i], all = 1;
+        for (int j = 1; j < k && all; j++)
+            all = tet_has(m, t, simplex[j]);
+        if (all && n < cap)
+            out[n++] = t;
+    }
+    return n;
+}
+
+#define MAX_RING 128
+
+int ns_remesh_split(NsMesh *m, NsRemeshStack *s, const int *simplex, int k, const double u[3])
+{
+    if (k < 2 || k > 4)
+        return -1;
+    for (int j = 0; j < k; j++)
+        if (!ns_mesh_node_alive(m, simplex[j]))
+            return -1;
+    int tets[MAX_RING];
+    int nt = simplex_tets(m, simplex, k, tets, MAX_RING);
+    if (nt == 0 || nt == MAX_RING)
+        return -1;
+    /* Every created tet must be positive in material space. */
+    for (int i = 0; i < nt; i++)
+        for (int j = 0; j < k; j++) {
+            const double *p[4];
+            for (int c = 0; c < 4; c++) {
+                int n = m->tet_node[4 * tets[i] + c];
+                p[c] = n == simplex[j] ? u : m->u + 3 * n;
+            }
+            if (!(ns_tet_volume(p[0], p[1], p[2], p[3]) > 0.0))
+                return -1;
+        }
+    double b[4], x[3], v[3], a[3];
+    int loc = ns_mesh_locate(m, u, tets[0], 1e-9, b);
+    if (loc < 0)
+        return -1;
+    interp_state(m, loc, b, x, v, a);
+    if (s->count == s->cap) {
+        int cap = s->cap ? 2 * s->cap : 16;
+        NsRemeshOp *o = realloc(s->ops, (size_t)cap * sizeof *o);
+        if (!o)
+            return -1;
+        s->ops = o;
+        s->cap = cap;
+    }
+    NsRemeshOp *op = &s->ops[s->count];
+    memset(op, 0, sizeof *op);
+    op->removed_tet = malloc((size_t)nt * 6 * sizeof *op->removed_tet);
+    op->added_tet = malloc((size_t)nt * (size_t)k * sizeof *op->added_tet);
+    int node = op->removed_tet && op->added_tet ? ns_mesh_add_node(m, u) : -1;
+    if (node < 0) {
+        free(op->removed_tet);
+        free(op->added_tet);
+        return -1;
+    }
+    memcpy(m->x + 3 * node, x, sizeof x);
+    memcpy(m->v + 3 * node, v, sizeof v);
+    memcpy(m->a + 3 * node, a, sizeof a);
+    op->kind = (NsRemeshKind)k;
+    op->node = node;
+    memcpy(op->simplex, simplex, (size_t)k * sizeof *simplex);
+    for (int i = 0; i < nt; i++) {
+        int *r = op->removed_tet + 6 * i;
+        r[0] = tets[i];
+        r[1] = m->tet_region[tets[i]];
+        memcpy(r + 2, m->tet_node + 4 * tets[i], 4 * sizeof *r);
+        ns_mesh_remove_tet(m, tets[i]);
+    }
+    op->removed = nt;
+    for (int i = 0; i < nt; i++)
+        for (int j = 0; j < k; j++) {
+            const int *r = op->removed_tet + 6 * i;
+            int tn[4];
+            for (int c = 0; c < 4; c++)
+                tn[c] = r[2 + c] == simplex[j] ? node : r[2 + c];
+            int t = ns_mesh_add_tet(m, tn, r[1]);
+            if (t < 0) { /* memory: put back everything added so far */
+                s->count++;
+                ns_remesh_undo(m, s);
+                return -1;
+            }
+            op->added_tet[op->added++] = t;
+        }
+    s->count++;
+    return node;
+}
+
+int ns_remesh_undo(NsMesh *m, NsRemeshStack *s)
+{
+    if (s->count == 0)
+        return -1;
+    NsRemeshOp *op = &s->ops[s->count - 1];
+    for (int i = op->added - 1; i >= 0; i--)
+        ns_mesh_remove_tet(m, op->added_tet[i]);
+    if (m->node_tets[op->node].count != 0)
+        return -1; /* the node is used by tets the operation did not make */
+    for (int i = op->removed - 1; i >= 0; i--) {
+        const int *r = op->removed_tet + 6 * i;
+        if (ns_mesh_add_tet(m, r + 2, r[1]) < 0)
+            return -1;
+    }
+    ns_mesh_remove_node(m, op->node);
+    free(op->removed_tet);
+    free(op->added_tet);
+    s->count--;
+    return 0;
+}
+
+int ns_remesh_original(const NsRemeshStack *s, int n, double u[3])
+{
+    for (int i = 0; i < s->snaps; i++)
+        if (s->snap_node[i] == n) {
+            memcpy(u, s->snap_u + 3 * i, 3 * sizeof *u);
+            return 1;
+        }
+    return 0;
+}
+
+/* Moves node n's material position to u, with world state (x, v, a) given; no checks. */
+static void set_node(NsMesh *m, int n, const double u[3], const double x[3], const double v[3],
+                     const double a[3])
+{
+    memcpy(m->u + 3 * n, u, 3 * sizeof *u);
+    memcpy(m->x + 3 * n, x, 3 * sizeof *x);
+    memcpy(m->v + 3 * n, v, 3 * sizeof *v);
+    memcpy(m->a + 3 * n, a, 3 * sizeof *a);
+}
+
+int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3])
+{
+    if (!ns_mesh_node_alive(m, n) || m->node_tets[n].count == 0)
+        return -1;
+    double b[4], x[3], v[3], a[3];
+    int loc = ns_mesh_locate(m, u, m->node_tets[n].items[0], 1e-9, b);
+    if (loc < 0)
+        return -1;
+    interp_state(m, loc, b, x, v, a);
+    double u0[3];
+    if (!ns_remesh_original(s, n, u0)) {
+        if (s->snaps == s->snap_cap) {
+            int cap = s->snap_cap ? 2 * s->snap_cap : 16;
+            int *sn = realloc(s->snap_node, (size_t)cap * sizeof *sn);
+            if (sn)
+                s->snap_node = sn;
+            double *su = realloc(s->snap_u, (size_t)cap * 3 * sizeof *su);
+            if (su)
+                s->snap_u = su;
+            if (!sn || !su)
+                return -1;
+            s->snap_cap = cap;
+        }
+        s->snap_node[s->snaps] = n;
+        memcpy(s->snap_u + 3 * s->snaps, m->u + 3 * n, 3 * sizeof(double));
+        s->snaps++;
+    }
+    set_node(m, n, u, x, v, a);
+    return 0;
+}
+
+/* ---- Algorithm 2 ---- */
+
+int ns_quality_vector_cmp(const double *a, int na, const double *b, int nb)
+{
+    int n = na < nb ? na : nb;
+    for (int i = 0; i < n; i++)
+        if (a[i] != b[i])
+            return a[i] > b[i] ? 1 : -1;
+    return (na < nb) - (na > nb); /* fewer tets left to compare: the other has more bad ones */
+}
+
+typedef struct Candidate {
+    int undo;       /* undo the top of the stack first */
+    int kind;       /* NS_REMESH_SNAP or a split's node count */
+    int simplex[4]; /* split: its nodes; snap: [0] the snapped node */
+    int move;       /* node repositioned on a segment after the operation (-1 none) */
+    int seg_b;      /* ... on the segment from the placed node to this one */
+    int release;    /* retraction: u1 leaves the needle and goes back to its original position */
+} Candidate;
+
+/* Saved state of a node, to put back after scoring. */
+typedef struct NodeSave {
+    int n;
+    double u[3], x[3], v[3], a[3];
+} NodeSave;
+
+static void node_save(const NsMesh *m, int n, NodeSave *s)
+{
+    s->n = n;
+    memcpy(s->u, m->u + 3 * n, sizeof s->u);
+    memcpy(s->x, m->x + 3 * n, sizeof s->x);
+    memcpy(s->v, m->v + 3 * n, sizeof s->v);
+    memcpy(s->a, m->a + 3 * n, sizeof s->a);
+}
+
+static void node_restore(NsMesh *m, const NodeSave *s)
+{
+    if (s->n >= 0)
+        set_node(m, s->n, s->u, s->x, s->v, s->a);
+}
+
+/* Moves node n to the point of segment [p (node pn), node b] that maximizes the worst quality of
+ * its tets (16 samples, then golden-section refinement); its world state is interpolated along
+ * the segment. */
+static void reposition(NsMesh *m, int n, int pn, int b)
+{
+    double up[3], ub[3], xp[3], xb[3], vp[3], vb[3], ap[3], ab[3];
+    memcpy(up, m->u + 3 * pn, sizeof up);
+    memcpy(ub, m->u + 3 * b, sizeof ub);
+    memcpy(xp, m->x + 3 * pn, sizeof xp);
+    memcpy(xb, m->x + 3 * b, sizeof xb);
+    memcpy(vp, m->v + 3 * pn, sizeof vp);
+    memcpy(vb, m->v + 3 * b, sizeof vb);
+    memcpy(ap, m->a + 3 * pn, sizeof ap);
+    memcpy(ab, m->a + 3 * b, sizeof ab);
+#define AT(s_)                                                                                     \
+    do {                                                                                           \
+        for (int i_ = 0; i_ < 3; i_++) {                                                           \
+            m->u[3 * n + i_] = up[i_] + (s_) * (ub[i_] - up[i_]);                                  \
+            m->x[3 * n + i_] = xp[i_] + (s_) * (xb[i_] - xp[i_]);                                  \
+            m->v[3 * n + i_] = vp[i_] + (s_) * (vb[i_] - vp[i_]);                                  \
+            m->a[3 * n + i_] = ap[i_] + (s_) * (ab[i_] - ap[i_]);                                  \
+        }                                                                                          \
+    } while (0)
+    double best_s = 0.5, best_q = -INFINITY;
+    for (int i = 1; i < 16; i++) {
+        double sv = i / 16.0;
+        AT(sv);
+        double q = node_min_quality(m, n);
+        if (q > best_q) {
+            best_q = q;
+            best_s = sv;
+        }
+    }
+    double lo = fmax(best_s - 1.0 / 16, 1e-3), hi = fmin(best_s + 1.0 / 16, 1.0 - 1e-3);
+    const double g = 0.5 * (sqrt(5.0) - 1.0);
+    for (int it = 0; it < 12; it++) {
+        double s1 = hi - g * (hi - lo), s2 = lo + g * (hi - lo);
+        AT(s1);
+        double q1 = node_min_quality(m, n);
+        AT(s2);
+        double q2 = node_min_quality(m, n);
+        if (q1 > best_q) {
+            best_q = q1;
+            best_s = s1;
+        }
+        if (q2 > best_q) {
+            best_q = q2;
+            best_s = s2;
+        }
+        if (q1 >= q2)
+            hi = s2;
+        else
+            lo = s1;
+    }
+    AT(best_s);
+#undef AT
+}
+
+/* The region's tets (incident to the region nodes, alive now), their qualities sorted. */
+static int region_quality(const NsMesh *m, const int *nodes, int nn, double *q, int cap)
+{
+    int *seen = (int *)(q + cap); /* the caller gives 2 cap doubles: tet ids after the values */
+    int n = 0;
+    for (int i = 0; i < nn; i++) {
+        if (!ns_mesh_node_alive(m, nodes[i]))
+            continue;
+        const NsIntList *l = &m->node_tets[nodes[i]];
+        for (int j = 0; j < l->count; j++) {
+            int t = l->items[j], dup = 0;
+            for (int k = 0; k < n && !dup; k++)
+                dup = seen[k] == t;
+            if (dup || n == cap)
+                continue;
+            seen[n] = t;
+            q[n++] = tet_quality_of(m, m->tet_node + 4 * t);
+        }
+    }
+    /* Insertion sort, ascending: the region is small. */
+    for (int i = 1; i < n; i++) {
+        double v = q[i];
+        int j = i - 1;
+        while (j >= 0 && q[j] > v) {
+            q[j + 1] = q[j];
+            j--;
+        }
+        q[j + 1] = v;
+    }
+    return n;
+}
+
+#define REGION_CAP 1024
+
+typedef struct Applied {
+    int ok;
+    int placed; /* the node at u_new */
+    int pushed; /* a split was pushed */
+    int undone; /* the top was undone (its state saved in `top`) */
+    NodeSave snap, moved, released, undone_node;
+    NsRemeshOp top; /* copy of the undone operation's simplex/kind */
+    double top_u[3];
+} Applied;
+
+/* Applies candidate c for u_new (the caller checks the result); returns 0 or -1 (not
+ * applicable: the mesh is then as before). */
+static int apply(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Candidate *c,
+                 const double u_new[3], Applied *ap)
+{
+    memset(ap, 0, sizeof *ap);
+    ap->snap.n = ap->moved.n = ap->released.n = ap->undone_node.n = -1;
+    if (c->undo) {
+        NsRemeshOp *op = &s->ops[s->count - 1];
+        node_save(m, op->node, &ap->undone_node);
+        ap->top.kind = op->kind;
+        memcpy(ap->top.simplex, op->simplex, sizeof op->simplex);
+        memcpy(ap->top_u, m->u + 3 * op->node, sizeof ap->top_u);
+        if (ns_remesh_undo(m, s))
+            return -1;
+        ap->undone = 1;
+    }
+    int placed = -1;
+    if (c->kind == NS_REMESH_SNAP) {
+        int n = c->simplex[0];
+        if (!ns_mesh_node_alive(m, n) || (m->flags[n] & NS_NODE_FIXED))
+            goto fail;
+        node_save(m, n, &ap->snap);
+        NsRemeshStack dummy; /* snaps while scoring must not record originals */
+        ns_remesh_stack_init(&dummy);
+        int rc = ns_remesh_snap(m, &dummy, n, u_new);
+        ns_remesh_stack_free(&dummy);
+        if (rc)
+            goto fail;
+        placed = n;
+    } else {
+        placed = ns_remesh_split(m, s, c->simplex, c->kind, u_new);
+        if (placed < 0)
+            goto fail;
+        ap->pushed = 1;
+    }
+    ap->placed = placed;
+    if (c->release) {
+        /* u1 leaves the needle: back to its original material position if it was snapped
+         * there, its world state interpolated at that point (as for a snap). */
+        double u0[3], b[4], x[3], v[3], a[3];
+        node_save(m, tip->u1, &ap->released);
+        if (ns_remesh_original(s, tip->u1, u0)) {
+            int loc = ns_mesh_locate(m, u0, m->node_tets[tip->u1].items[0], 1e-9, b);
+            if (loc >= 0) {
+                interp_state(m, loc, b, x, v, a);
+                set_node(m, tip->u1, u0, x, v, a);
+            }
+        }
+    }
+    /* The needle node behind the new tip slides to its best place on the segment, unless it
+     * is fixed or on the boundary (moving it would change the boundary; skin entry allows). */
+    if (c->move >= 0 && ns_mesh_node_alive(m, c->move) && ns_mesh_node_alive(m, c->seg_b) &&
+        !(m->flags[c->move] & NS_NODE_FIXED) && c->move != placed &&
+        (tip->allow_boundary || !node_on_boundary(m, c->move))) {
+        node_save(m, c->move, &ap->moved);
+        reposition(m, c->move, placed, c->seg_b);
+    }
+    ap->ok = 1;
+    return 0;
+fail:
+    if (ap->undone) {
+        /* Redo the undone split exactly (same node and slots, LIFO free lists) and its state. */
+        ns_remesh_split(m, s, ap->top.simplex, (int)ap->top.kind, ap->top_u);
+        node_restore(m, &ap->undone_node);
+        ap->undone = 0;
+    }
+    return -1;
+}
+
+/* Reverts what apply did. */
+static void revert(NsMesh *m, NsRemeshStack *s, Applied *ap)
+{
+    node_restore(m, &ap->moved);
+    node_restore(m, &ap->released);
+    if (ap->pushed)
+        ns_remesh_undo(m, s);
+    node_restore(m, &ap->snap);
+    if (ap->undone) {
+        ns_remesh_split(m, s, ap->top.simplex, (int)ap->top.kind, ap->top_u);
+        node_restore(m, &ap->undone_node);
+    }
+}
+
+/* The fifteen standard operations on tet t placing a node at u_new: 4 snaps, 6 edge splits,
+ * 4 face splits, the tet split. */
+static int standard_ops(const NsMesh *m, int t, Candidate *out)
+{
+    const int *tn = m->tet_node + 4 * t;
+    int n = 0;
+    for (int i = 0; i < 4; i++)
+        out[n++] = (Candidate){0, NS_REMESH_SNAP, {tn[i], -1, -1, -1}, -1, -1, 0};
+    for (int i = 0; i < 4; i++)
+        for (int j = i + 1; j < 4; j++)
+            out[n++] = (Candidate){0, 2, {tn[i], tn[j], -1, -1}, -1, -1, 0};
+    for (int f = 0; f < 4; f++)
+        out[n++] = (Candidate){
+            0,  3,  {tn[ns_tet_face[f][0]], tn[ns_tet_face[f][1]], tn[ns_tet_face[f][2]], -1},
+            -1, -1, 0};
+    out[n++] = (Candidate){0, 4, {tn[0], tn[1], tn[2], tn[3]}, -1, -1, 0};
+    return n;
+}
+
+static int chain_index(const NsRemeshTip *tip, int n)
+{
+    for (int i = 0; i < tip->chain_len; i++)
+        if (tip->chain[i] == n)
+            return i;
+    return -1;
+}
+
+/* Would the candidate move a needle node off the needle or split a needle segment? Snapping is
+ * allowed for u1 (the tip snap) and for u2 when u1 leaves (undo or retraction); a split may not
+ * contain two consecutive needle nodes, except u1-u2 in a retraction (the tip backs into it). */
+static int breaks_chain(const NsRemeshTip *tip, const Candidate *c)
+{
+    if (c->kind == NS_REMESH_SNAP) {
+        int n = c->simplex[0], i = chain_index(tip, n);
+        if (i < 0 || n == tip->u1)
+            return 0;
+        return !(n == tip->u2 && (c->undo || c->release));
+    }
+    for (int a = 0; a < c->kind; a++)
+        for (int b = 0; b < c->kind; b++) {
+            int ia = chain_index(tip, c->simplex[a]), ib = chain_index(tip, c->simplex[b]);
+            if (ia < 0 || ib != ia + 1)
+                continue;
+            if (!tip->penetrating && !c->undo && ia == 0)
+                continue; /* retraction into the u1-u2 segment */
+            if (c->undo && ia == 0)
+                continue; /* u1 is gone after the undo */
+            return 1;
+        }
+    return 0;
+}
+
+int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_new[3],
+                  NsRemeshResult *res, char *err, int err_sz)
+{
+    memset(res, 0, sizeof *res);
+    int u1 = tip->u1, u2 = tip->u2, u3 = tip->u3;
+    if (!ns_mesh_node_alive(m, u1) || !ns_mesh_node_alive(m, u2)) {
+        snprintf(err, (size_t)err_sz, "remesh: the needle's tip nodes are not alive");
+        return -1;
+    }
+    int t = ns_mesh_locate(m, u_new, tip->hint_tet, 1e-9, NULL);
+    if (t < 0) {
+        snprintf(err, (size_t)err_sz, "remesh: the tip (%.4g, %.4g, %.4g) m is outside the tissue",
+                 u_new[0], u_new[1], u_new[2]);
+        return -1;
+    }
+    int top_made_u1 = s->count > 0 && s->ops[s->count - 1].node == u1;
+    Candidate cand[64];
+    int nc = 0;
+    /* Line 2: the tip node snaps to u_new. */
+    cand[nc++] = (Candidate){0, NS_REMESH_SNAP, {u1, -1, -1, -1}, -1, -1, 0};
+    Candidate std[15];
+    int ns = standard_ops(m, t, std);
+    if (tip->penetrating) {
+        /* Line 5: a node other than u1 at u_new, joined to u1; u1 then slides on [u_new, u2]. */
+        for (int i = 0; i < ns; i++) {
+            if (std[i].kind == NS_REMESH_SNAP && std[i].simplex[0] == u1)
+                continue;
+            Candidate c = std[i];
+            c.move = u1;
+            c.seg_b = u2;
+            cand[nc++] = c;
+        }
+    } else if (!top_made_u1) {
+        /* Line 10: a node at u_new joined to (or being) u2; u1 leaves the needle. */
+        for (int i = 0; i < ns; i++) {
+            if (std[i].kind == NS_REMESH_SNAP && std[i].simplex[0] == u1)
+                continue;
+            Candidate c = std[i];
+            c.release = 1;
+            cand[nc++] = c;
+        }
+    }
+    int t_undo = -1, undo_nodes[4] = {-1, -1, -1, -1};
+    if (top_made_u1) {
+        /* Lines 6-8: undo the split that made u1, then a standard operation on the tet that will
+         * contain u_new, joined to (or being) u2; u2 then slides on [u_new, u3]. The tet after
+         * the undo is found by doing the undo and redoing it. */
+        NsRemeshOp *op = &s->ops[s->count - 1];
+        NodeSave keep;
+        node_save(m, op->node, &keep);
+        NsRemeshKind kind = op->kind;
+        int simplex[4];
+        memcpy(simplex, op->simplex, sizeof simplex);
+        double uo[3];
+        memcpy(uo, m->u + 3 * op->node, sizeof uo);
+        if (ns_remesh_undo(m, s) == 0) {
+            t_undo = ns_mesh_locate(
+                m, u_new, m->node_tets[u2].count ? m->node_tets[u2].items[0] : -1, 1e-9, NULL);
+            if (t_undo >= 0)
+                memcpy(undo_nodes, m->tet_node + 4 * t_undo, sizeof undo_nodes);
+            Candidate su[15];
+            int nsu = t_undo >= 0 ? standard_ops(m, t_undo, su) : 0;
+            for (int i = 0; i < nsu && nc < 64; i++) {
+                Candidate c = su[i];
+                c.undo = 1;
+                c.move = u3 >= 0 ? u2 : -1;
+                c.seg_b = u3;
+                cand[nc++] = c;
+            }
+            ns_remesh_split(m, s, simplex, (int)kind, uo);
+            node_restore(m, &keep);
+        }
+    }
+    /* The region: nodes of t (and t_undo), u1, u2, u3 and u1's neighbours. */
+    int rn[64], nrn = 0;
+#define ADD_NODE(n_)                                                                               \
+    do {                                                                                           \
+        int d_ = 0;                                                                                \
+        for (int k_ = 0; k_ < nrn && !d_; k_++)                                                    \
+            d_ = rn[k_] == (n_);                                                                   \
+        if (!d_ && (n_) >= 0 && nrn < 64)                                                          \
+            rn[nrn++] = (n_);                                                                      \
+    } while (0)
+    for (int k = 0; k < 4; k++) {
+        ADD_NODE(m->tet_node[4 * t + k]);
+        ADD_NODE(undo_nodes[k]);
+    }
+    ADD_NODE(u1);
+    ADD_NODE(u2);
+    ADD_NODE(u3);
+    const NsIntList *l1 = &m->node_tets[u1];
+    for (int i = 0; i < l1->count; i++)
+        for (int k = 0; k < 4; k++)
+            ADD_NODE(m->tet_node[4 * l1->items[i] + k]);
+    double *qbest = malloc(4 * REGION_CAP * sizeof *qbest);
+    if (!qbest) {
+        snprintf(err, (size_t)err_sz, "remesh: out of memory");
+        return -1;
+    }
+    double *qcur = qbest + 2 * REGION_CAP;
+    int best = -1, nbest = 0;
+    for (int i = 0; i < nc; i++) {
+        const Candidate *c = &cand[i];
+        if (breaks_chain(tip, c))
+            continue;
+        Applied ap;
+        if (apply(m, s, tip, c, u_new, &ap))
+            continue;
+        int ok = 1;
+        /* Connectivity of the needle's chain. */
+        if (c->undo || c->release)
+            ok = connected(m, ap.placed, u2);
+        else if (c->kind != NS_REMESH_SNAP || c->simplex[0] != u1)
+            ok = connected(m, ap.placed, u1);
+        /* The boundary: a placed or moved boundary node changes it. */
+        if (ok && !tip->allow_boundary) {
+            if (node_on_boundary(m, ap.placed))
+                ok = 0;
+            if (ap.moved.n >= 0 && node_on_boundary(m, ap.moved.n))
+                ok = 0;
+        }
+        int nq = 0;
+        if (ok) {
+            int rn2[65];
+            memcpy(rn2, rn, (size_t)nrn * sizeof *rn2);
+            rn2[nrn] = ap.placed;
+            nq = region_quality(m, rn2, nrn + 1, qcur, REGION_CAP);
+            ok = nq > 0 && qcur[0] > 0.0;
+        }
+        if (ok) {
+            res->candidates++;
+            if (best < 0 || ns_quality_vector_cmp(qcur, nq, qbest, nbest) > 0) {
+                best = i;
+                nbest = nq;
+                memcpy(qbest, qcur, (size_t)nq * sizeof *qbest);
+            }
+        }
+        revert(m, s, &ap);
+    }
+    if (best < 0) {
+        free(qbest);
+        snprintf(err, (size_t)err_sz,
+                 "remesh: no valid operation places the tip at (%.4g, %.4g, %.4g) m", u_new[0],
+                 u_new[1], u_new[2]);
+        return -1;
+    }
+    Applied ap;
+    const Candidate *c = &cand[best];
+    if (apply(m, s, tip, c, u_new, &ap)) {
+        free(qbest);
+        snprintf(err, (size_t)err_sz, "remesh: the chosen operation failed");
+        return -1;
+    }
+    if (c->kind == NS_REMESH_SNAP) {
+        /* Record the first original position of the snapped node (scoring did not). */
+        double u0[3];
+        int n = c->simplex[0];
+        if (!ns_remesh_original(s, n, u0)) {
+            NodeSave now;
+            node_save(m, n, &now);
+            node_restore(m, &ap.snap);
+            ns_remesh_snap(m, s, n, now.u);
+            node_restore(m, &now);
+        }
+    }
+    res->kind = c->kind == NS_REMESH_SNAP ? NS_REMESH_SNAP : (NsRemeshKind)c->kind;
+    res->undone = c->undo;
+    res->tip = ap.placed;
+    res->dropped = c->undo || c->release;
+    res->min_quality = qbest[0];
+    tip->hint_tet = m->node_tets[ap.placed].count ? m->node_tets[ap.placed].items[0] : -1;
+    free(qbest);
+    return 0;
+}

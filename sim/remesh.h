@@ -1,0 +1,111 @@
+/* Tissue remeshing at the needle tip (paper §3.4.1, Algorithm 2, Figure 3), in material space.
+ *
+ * Operations. A node snap moves an existing node to the new tip position u_new. A split of a
+ * simplex S (an edge, a face or a tet: k = 2, 3 or 4 nodes) inserts a node m at u_new and
+ * replaces every tet that contains S by k tets, each with one node of S replaced by m: the edge,
+ * face and tet splits of the paper are the same operation on simplices of three sizes. Splits
+ * change the topology; they are kept on a stack (NsRemeshStack) with what they removed, so that
+ * popping the stack restores the earlier topology exactly, tet by tet (a full retraction gives
+ * back the original mesh). Snaps are not on the stack; the first snap of a node records its
+ * original position, so a node the needle leaves can go back to it.
+ *
+ * Choice (ns_remesh_tip, Algorithm 2). The candidates are the snap of the needle's tip node u1,
+ * the fifteen standard operations on the tet containing u_new (point location by walking from
+ * a hint), and, when u1 was created by the operation atop the stack, "undo it, then a standard
+ * operation" composites. Candidates that would change the boundary (unless allowed: skin entry)
+ * or leave the needle's chain disconnected are discarded. Each candidate is applied for real,
+ * with the repositioning of u1 (or u2) along the needle segment that maximizes its tets' worst
+ * quality, scored by the quality vector of the region (sorted worst first, compared
+ * lexicographically), and undone; the best is applied. Quality is signed volume over rms edge
+ * length cubed (sim/quality.h), in material coordinates.
+ *
+ * World position, velocity and acceleration of a new or moved node come from barycentric
+ * interpolation in the tet containing its new material position. No Lua, no I/O. */
+#ifndef NS_REMESH_H
+#define NS_REMESH_H
+
+#include <stdbool.h>
+
+#include "mesh.h"
+
+typedef enum NsRemeshKind {
+    NS_REMESH_NONE = 0,
+    NS_REMESH_SNAP = 1,
+    NS_REMESH_EDGE_SPLIT = 2,
+    NS_REMESH_FACE_SPLIT = 3,
+    NS_REMESH_TET_SPLIT = 4,
+} NsRemeshKind;
+
+/* A split as applied: enough to undo it exactly. */
+typedef struct NsRemeshOp {
+    NsRemeshKind kind;
+    int node;         /* the node it created */
+    int simplex[4];   /* the split simplex's nodes (kind = its node count) */
+    int removed;      /* tets removed */
+    int *removed_tet; /* (removed x 6) slot, region, 4 nodes, in removal order */
+    int added;        /* tets added */
+    int *added_tet;   /* (added) slots, in order */
+} NsRemeshOp;
+
+typedef struct NsRemeshStack {
+    int count, cap;
+    NsRemeshOp *ops;
+    /* First-snap records: node, original material position. */
+    int snaps, snap_cap;
+    int *snap_node;
+    double *snap_u;
+} NsRemeshStack;
+
+void ns_remesh_stack_init(NsRemeshStack *s);
+void ns_remesh_stack_free(NsRemeshStack *s);
+
+/* The tet containing material point p (barycentric coordinates into bary, may be NULL), walking
+ * across faces from tet `start` (any alive tet if start is not), then by a full search if the
+ * walk fails. Points within tol (barycentric) of a tet count as inside. Returns -1 if p is
+ * outside the mesh. */
+int ns_mesh_locate(const NsMesh *m, const double p[3], int start, double tol, double bary[4]);
+
+/* Splits the simplex of k nodes (2: edge, 3: face, 4: tet; every tet containing them) at
+ * material point u and pushes the operation; the new node's world state is interpolated in
+ * the tet containing u (or the simplex's own tets). Returns the new node, or -1 (no tet contains
+ * the simplex, a created tet would not be positive in material space, memory: mesh unchanged). */
+int ns_remesh_split(NsMesh *m, NsRemeshStack *s, const int *simplex, int k, const double u[3]);
+/* Undoes and pops the operation atop the stack (its node must have no tets beyond the ones it
+ * made). Returns 0, or -1 (empty stack, memory). */
+int ns_remesh_undo(NsMesh *m, NsRemeshStack *s);
+/* Moves node n to material point u (world state interpolated as for a split), recording its
+ * first original position. Returns 0, or -1 (u outside the mesh, memory). */
+int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3]);
+/* The original material position of a snapped node (1), or 0 if it was never snapped. */
+int ns_remesh_original(const NsRemeshStack *s, int n, double u[3]);
+
+/* Needle tip state for Algorithm 2. */
+typedef struct NsRemeshTip {
+    int u1, u2, u3;   /* tissue nodes of the needle: the tip, the one behind it, the one
+                         behind that (-1 if none) */
+    const int *chain; /* every tissue node of the needle, tip first (chain[0] = u1) */
+    int chain_len;
+    int penetrating;     /* 1: DYNAMIC+ (cutting forward); 0: DYNAMIC- (retracting) */
+    bool allow_boundary; /* skin entry: operations may change the boundary */
+    int hint_tet;        /* where the point location starts (updated on return) */
+} NsRemeshTip;
+
+typedef struct NsRemeshResult {
+    NsRemeshKind kind;  /* the standard operation performed (SNAP for the tip snap) */
+    int undone;         /* the top of the stack was popped first */
+    int tip;            /* the needle's new tip node (at u_new) */
+    int dropped;        /* u1 left the needle (the chain is now ... u2, tip) */
+    int candidates;     /* candidates scored */
+    double min_quality; /* worst quality in the region after the operation */
+} NsRemeshResult;
+
+/* Algorithm 2: remeshes around the needle tip moving to material point u_new. Returns 0, or
+ * -1 with a message (u_new outside the tissue, no valid candidate, memory). */
+int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_new[3],
+                  NsRemeshResult *res, char *err, int err_sz);
+
+/* Sorted quality vector comparison: > 0 if a (na values, sorted ascending) is lexicographically
+ * better than b. */
+int ns_quality_vector_cmp(const double *a, int na, const double *b, int nb);
+
+#endif

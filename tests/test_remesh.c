@@ -1,0 +1,209 @@
+/* Tests of the tip remesher (sim/remesh.c): point location, splits and their undo, and
+ * Algorithm 2 driving a needle tip into a structured block and back out, with the structural
+ * checks of issue 6 after every step (mesh valid, needle chain joined by tissue edges, tip at
+ * its material position, no inverted tet) and the original topology restored at the end. */
+#include <stdlib.h>
+
+#include "mesh_grid.h"
+#include "ns_test.h"
+#include "quality.h"
+#include "remesh.h"
+
+#define H 0.002 /* grid spacing [m] */
+
+static int make_block(NsMesh *m, int n)
+{
+    char err[256];
+    double lo[3] = {0, 0, 0}, hi[3] = {n * H, n * H, n * H};
+    ENSURE(ns_mesh_grid_box(m, lo, hi, n, n, n, 0, err, sizeof err) == 0);
+    return 0;
+}
+
+static int locate_finds_containing_tet(void)
+{
+    NsMesh m;
+    ENSURE(make_block(&m, 4) == 0);
+    int start = 0;
+    for (int i = 0; i < 200; i++) {
+        double p[3] = {0.008 * (0.01 + 0.98 * fmod(0.6180339887 * i, 1.0)),
+                       0.008 * (0.01 + 0.98 * fmod(0.7548776662 * i + 0.3, 1.0)),
+                       0.008 * (0.01 + 0.98 * fmod(0.5698402910 * i + 0.7, 1.0))};
+        double b[4];
+        int t = ns_mesh_locate(&m, p, start, 1e-12, b);
+        ENSURE(t >= 0);
+        double q[3] = {0, 0, 0};
+        for (int k = 0; k < 4; k++) {
+            ENSURE(b[k] >= -1e-12);
+            for (int c = 0; c < 3; c++)
+                q[c] += b[k] * m.u[3 * m.tet_node[4 * t + k] + c];
+        }
+        for (int c = 0; c < 3; c++)
+            ENSURE_SMALL(q[c] - p[c], 1e-15);
+        start = t;
+    }
+    double out[3] = {-0.001, 0.004, 0.004};
+    ENSURE(ns_mesh_locate(&m, out, 0, 1e-12, NULL) == -1);
+    ns_mesh_free(&m);
+    return 0;
+}
+
+/* The alive tets, slot by slot (nodes and region), equal in the two meshes. */
+static int same_tets(const NsMesh *a, const NsMesh *b)
+{
+    for (int t = 0; t < a->tet_slots || t < b->tet_slots; t++) {
+        int la = ns_mesh_tet_alive(a, t), lb = ns_mesh_tet_alive(b, t);
+        if (la != lb)
+            return 0;
+        if (la && (memcmp(a->tet_node + 4 * t, b->tet_node + 4 * t, 4 * sizeof(int)) ||
+                   a->tet_region[t] != b->tet_region[t]))
+            return 0;
+    }
+    return 1;
+}
+
+static int splits_undo_exactly(void)
+{
+    NsMesh m, orig;
+    ENSURE(make_block(&m, 4) == 0);
+    ENSURE(ns_mesh_copy(&orig, &m) == 0);
+    uint64_t h0 = ns_mesh_topology_hash(&m);
+    NsRemeshStack s;
+    ns_remesh_stack_init(&s);
+    char err[256];
+    /* Edge, face and tet splits at points inside their simplices' tets, stacked. */
+    for (int i = 0; i < 12; i++) {
+        double p[3] = {0.002 + 0.004 * fmod(0.618 * (i + 1), 1.0),
+                       0.002 + 0.004 * fmod(0.755 * (i + 1), 1.0),
+                       0.002 + 0.004 * fmod(0.570 * (i + 1), 1.0)};
+        double b[4];
+        int t = ns_mesh_locate(&m, p, 0, 0.0, b);
+        ENSURE(t >= 0);
+        const int *tn = m.tet_node + 4 * t;
+        int k = 2 + i % 3, simplex[4] = {tn[0], tn[1], tn[2], tn[3]};
+        int before = m.tet_alive;
+        int node = ns_remesh_split(&m, &s, simplex, k, p);
+        if (node < 0)
+            continue; /* the point does not suit this simplex (a created tet not positive) */
+        ENSURE(m.tet_alive > before);
+        ENSURE(ns_mesh_validate(&m, err, sizeof err) == 0);
+        NsQualityStats q;
+        ns_mesh_quality(&m, false, &q);
+        ENSURE(q.inverted == 0);
+    }
+    ENSURE(s.count >= 6);
+    while (s.count > 0)
+        ENSURE(ns_remesh_undo(&m, &s) == 0);
+    ENSURE(ns_mesh_validate(&m, err, sizeof err) == 0);
+    ENSURE(ns_mesh_topology_hash(&m) == h0);
+    ENSURE(same_tets(&m, &orig));
+    ns_remesh_stack_free(&s);
+    ns_mesh_free(&m);
+    ns_mesh_free(&orig);
+    return 0;
+}
+
+/* The structural checks: valid mesh, consecutive needle nodes joined by an edge, no inverted
+ * tet in material space. */
+static int structure_ok(const NsMesh *m, const int *chain, int n)
+{
+    char err[256];
+    if (ns_mesh_validate(m, err, sizeof err)) {
+        fprintf(stderr, "  %s\n", err);
+        return 0;
+    }
+    for (int i = 0; i + 1 < n; i++) {
+        int a = chain[i], b = chain[i + 1], joined = 0;
+        const NsIntList *l = &m->node_tets[a];
+        for (int j = 0; j < l->count && !joined; j++)
+            for (int k = 0; k < 4; k++)
+                joined |= m->tet_node[4 * l->items[j] + k] == b;
+        if (!joined)
+            return 0;
+    }
+    NsQualityStats q;
+    ns_mesh_quality(m, false, &q);
+    return q.inverted == 0;
+}
+
+/* Drives the tip from the middle of the x = 0 face obliquely into the block, 0.3 H a step,
+ * then back. */
+static int insert_and_retract_restores_topology(void)
+{
+    const int n = 8;
+    NsMesh m, orig;
+    ENSURE(make_block(&m, n) == 0);
+    ENSURE(ns_mesh_copy(&orig, &m) == 0);
+    uint64_t h0 = ns_mesh_topology_hash(&m);
+    NsQualityStats q0;
+    ns_mesh_quality(&m, false, &q0);
+    /* The needle enters at the centre of the x = 0 face: grid node (0, n/2, n/2), then (1, ...). */
+    int e = (n + 1) * (n / 2 + (n + 1) * (n / 2)), chain[512] = {e + 1, e}, len = 2;
+    NsRemeshStack s;
+    ns_remesh_stack_init(&s);
+    NsRemeshTip tip = {0};
+    tip.hint_tet = m.node_tets[e + 1].items[0];
+    char err[256];
+    double u[3] = {H, n / 2 * H, n / 2 * H}, dir3[3] = {1.0, 0.31, -0.17};
+    double dl = sqrt(dir3[0] * dir3[0] + dir3[1] * dir3[1] + dir3[2] * dir3[2]);
+    const double step = 0.3 * H;
+    int steps = (int)((0.6 * n * H) / step), kinds[5] = {0}, worst_q_ok = 1;
+    double qmin = INFINITY;
+    for (int dir = 1; dir >= -1; dir -= 2)
+        for (int k = 0; k < steps; k++) {
+            for (int c = 0; c < 3; c++)
+                u[c] += dir * step * dir3[c] / dl; /* oblique to the grid: not along its lines */
+            tip.u1 = chain[0];
+            tip.u2 = chain[1];
+            tip.u3 = len > 2 ? chain[2] : -1;
+            tip.chain = chain;
+            tip.chain_len = len;
+            tip.penetrating = dir > 0;
+            NsRemeshResult r;
+            if (ns_remesh_tip(&m, &s, &tip, u, &r, err, sizeof err)) {
+                fprintf(stderr, "  step %d dir %d: %s\n", k, dir, err);
+                return 1;
+            }
+            kinds[r.kind]++;
+            /* The chain: the tip replaces u1 if u1 left, else goes in front of it (or is u1). */
+            if (r.dropped) {
+                chain[0] = r.tip;
+                if (len > 2 && chain[1] == r.tip) { /* u2 itself was snapped to the tip */
+                    memmove(chain, chain + 1, (size_t)(len - 1) * sizeof *chain);
+                    len--;
+                }
+            } else if (r.tip != chain[0]) {
+                ENSURE(len < 511);
+                memmove(chain + 1, chain, (size_t)len * sizeof *chain);
+                chain[0] = r.tip;
+                len++;
+            }
+            for (int c = 0; c < 3; c++)
+                ENSURE_SMALL(m.u[3 * chain[0] + c] - u[c], 1e-12);
+            ENSURE(structure_ok(&m, chain, len));
+            qmin = fmin(qmin, r.min_quality);
+            worst_q_ok &= r.min_quality > 0.0;
+        }
+    printf("  %d steps each way: snaps %d, edge splits %d, face splits %d, tet splits %d; worst "
+           "region quality %.3f (mesh %.3f); stack %d, chain %d\n",
+           steps, kinds[1], kinds[2], kinds[3], kinds[4], qmin, q0.min_quality, s.count, len);
+    ENSURE(worst_q_ok);
+    ENSURE(kinds[2] + kinds[3] + kinds[4] > 0); /* it did cut */
+    /* Back at the start: the original topology and node positions. */
+    ENSURE(s.count == 0);
+    ENSURE(ns_mesh_topology_hash(&m) == h0);
+    double dmax = 0.0;
+    for (int i = 0; i < m.node_slots; i++)
+        if (ns_mesh_node_alive(&m, i))
+            for (int c = 0; c < 3; c++)
+                dmax = fmax(dmax, fabs(m.u[3 * i + c] - orig.u[3 * i + c]));
+    printf("  nodes back within %.2e m (%.2e of the spacing)\n", dmax, dmax / H);
+    ENSURE(dmax <= 0.01 * H);
+    ns_remesh_stack_free(&s);
+    ns_mesh_free(&m);
+    ns_mesh_free(&orig);
+    return 0;
+}
+
+NS_TEST_MAIN({"locate_finds_containing_tet", locate_finds_containing_tet},
+             {"splits_undo_exactly", splits_undo_exactly},
+             {"insert_and_retract_restores_topology", insert_and_retract_restores_topology})
