@@ -55,6 +55,7 @@ void ns_tissue_free(NsTissue *t)
     free(t->mass);
     free(t->force);
     free(t->dof_fixed);
+    free(t->was_alive);
     free(t->work);
     ns_bsm_free(&t->K);
     ns_bsm_free(&t->D);
@@ -134,6 +135,105 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     for (int i = 0; i < nn; i++)
         if ((M->flags[i] & NS_NODE_FIXED) || !(M->flags[i] & NS_NODE_ALIVE) || t->mass[i] <= 0.0)
             t->dof_fixed[3 * i] = t->dof_fixed[3 * i + 1] = t->dof_fixed[3 * i + 2] = 1;
+    t->tet_cap = nt > 0 ? nt : 1;
+    t->node_cap = nn > 0 ? nn : 1;
+    t->was_alive = calloc((size_t)t->node_cap, 1);
+    if (!t->was_alive) {
+        ns_set_err(err, err_sz, "out of memory");
+        ns_tissue_free(t);
+        return -1;
+    }
+    for (int i = 0; i < nn; i++)
+        t->was_alive[i] = (M->flags[i] & NS_NODE_ALIVE) != 0;
+    return 0;
+}
+
+/* Grows *p from old to cap elements of size elem, zeroing the new ones. */
+static int grow_zero(void **p, int old, int cap, size_t elem)
+{
+    void *q = realloc(*p, (size_t)cap * elem);
+    if (!q)
+        return -1;
+    memset((char *)q + (size_t)old * elem, 0, (size_t)(cap - old) * elem);
+    *p = q;
+    return 0;
+}
+
+int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
+{
+    const NsMesh *M = &t->mesh;
+    int nt = M->tet_slots, nn = M->node_slots;
+    if (nt > t->tet_cap) {
+        int cap = nt > 2 * t->tet_cap ? nt : 2 * t->tet_cap, old = t->tet_cap;
+        if (grow_zero((void **)&t->rest, old, cap, sizeof *t->rest) ||
+            grow_zero((void **)&t->frame, old, cap, sizeof *t->frame) ||
+            grow_zero((void **)&t->jframe, old, cap, sizeof *t->jframe) ||
+            grow_zero((void **)&t->jvalid, old, cap, 1) ||
+            grow_zero((void **)&t->jnew, old, cap, 1) ||
+            grow_zero((void **)&t->tet_force, old, cap, 12 * sizeof(double)) ||
+            grow_zero((void **)&t->tet_jac, old, cap, 288 * sizeof(double))) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        t->tet_cap = cap;
+    }
+    if (nn > t->node_cap) {
+        int cap = nn > 2 * t->node_cap ? nn : 2 * t->node_cap, old = t->node_cap;
+        if (grow_zero((void **)&t->mass, old, cap, sizeof(double)) ||
+            grow_zero((void **)&t->force, old, cap, 3 * sizeof(double)) ||
+            grow_zero((void **)&t->dof_fixed, old, cap, 3) ||
+            grow_zero((void **)&t->was_alive, old, cap, 1) ||
+            grow_zero((void **)&t->work, old, cap, 12 * sizeof(double))) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        for (int i = old; i < cap; i++) /* empty slots are Dirichlet */
+            t->dof_fixed[3 * i] = t->dof_fixed[3 * i + 1] = t->dof_fixed[3 * i + 2] = 1;
+        t->node_cap = cap;
+    }
+    if (ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) || ns_bsm_resize(&t->A, nn)) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    /* Rest data: recomputed for every tet, the Jacobians of changed ones marked stale. */
+    memset(t->mass, 0, (size_t)nn * sizeof(double));
+    for (int e = 0; e < nt; e++) {
+        if (!ns_mesh_tet_alive(M, e)) {
+            t->jvalid[e] = 0;
+            continue;
+        }
+        const int *tn = M->tet_node + 4 * e;
+        if (M->tet_region[e] >= t->material_count) {
+            ns_set_err(err, err_sz, "tet %d has region %d, which has no material", e,
+                       M->tet_region[e]);
+            return -1;
+        }
+        NsTetRest r;
+        if (ns_fem_rest(M->u + 3 * tn[0], M->u + 3 * tn[1], M->u + 3 * tn[2], M->u + 3 * tn[3],
+                        &r)) {
+            ns_set_err(err, err_sz, "tet %d is flat or inverted in material space (volume %g)", e,
+                       r.W);
+            return -1;
+        }
+        if (memcmp(&r, &t->rest[e], sizeof r) != 0) {
+            t->rest[e] = r;
+            t->jvalid[e] = 0;
+        }
+        double m4 = t->materials[M->tet_region[e]].density * r.W / 4.0;
+        for (int k = 0; k < 4; k++)
+            t->mass[tn[k]] += m4;
+    }
+    /* DOFs: new nodes free (unless flagged fixed), removed ones fixed, others as they were. */
+    for (int i = 0; i < nn; i++) {
+        int alive = (M->flags[i] & NS_NODE_ALIVE) != 0;
+        uint8_t *f = t->dof_fixed + 3 * i;
+        if (alive && !t->was_alive[i])
+            f[0] = f[1] = f[2] = (M->flags[i] & NS_NODE_FIXED) != 0;
+        if (!alive || t->mass[i] <= 0.0)
+            f[0] = f[1] = f[2] = 1;
+        t->was_alive[i] = (uint8_t)alive;
+    }
+    t->kd_valid = 0; /* every row of K and D gathered again at the next force evaluation */
     return 0;
 }
 

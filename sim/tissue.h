@@ -77,7 +77,9 @@ typedef struct NsTissue {
     NsBlockMatrix K, D, A;
     double *work; /* scratch, 4 x 3 node_slots */
     uint64_t steps;
-    uint64_t kd_version; /* topology version K and D were last gathered for */
+    int tet_cap, node_cap; /* slots the per-tet and per-node arrays hold */
+    uint8_t *was_alive;    /* (node_cap) node alive at the last init / sync */
+    uint64_t kd_version;   /* topology version K and D were last gathered for */
     int kd_valid;        /* 0: every block row of K and D must be gathered again */
     /* Work partition (§3.6.3), a function of the topology and the thread count only: part p
      * owns nodes part_nodes[part_node_start[p] .. part_node_start[p+1]) and tets likewise. */
@@ -97,6 +99,16 @@ typedef struct NsTissue {
 int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *materials,
                    int material_count, const NsTissueParams *params, char *err, int err_sz);
 void ns_tissue_free(NsTissue *t);
+
+/* After the mesh was changed in place (t->mesh: nodes or tets added, removed or moved in
+ * material space, as the tip remesher does, sim/remesh.h): grows the per-node and per-tet
+ * arrays to the mesh's slots, recomputes the rest data of every alive tet and marks the
+ * Jacobians of those whose rest data changed for rebuilding, recomputes the lumped masses, and
+ * sets the DOFs of new nodes free (fixed if flagged NS_NODE_FIXED) and of removed ones fixed;
+ * DOFs of surviving nodes keep what ns_tissue_fix_dof set. O(tets), no factorization. Returns
+ * 0, or -1 with a message (a flat or inverted tet in material space, a region without a
+ * material, memory: the tissue must not be stepped then). */
+int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz);
 
 /* Fix or free one DOF (node i, axis c) as a Dirichlet condition. */
 void ns_tissue_fix_dof(NsTissue *t, int node, int axis, int fixed);
