@@ -40,6 +40,10 @@ extern const int ns_validate_rod_case_count;
 extern const NsValidateCase ns_validate_coupling_cases[];
 extern const int ns_validate_coupling_case_count;
 
+/* The tip remeshing and steering cases (engine/validate_remesh.c). */
+extern const NsValidateCase ns_validate_remesh_cases[];
+extern const int ns_validate_remesh_case_count;
+
 /* Appends printf-style text to r->detail. */
 void ns_validate_detail(NsValidateResult *r, const char *fmt, ...)
     __attribute__((format(printf, 2, 3)));

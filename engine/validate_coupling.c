@@ -34,6 +34,7 @@ typedef struct SceneDef {
     NsCoupledSolverKind solver;
     double eta;   /* viscous friction per length [N s/m^2] */
     double gamma; /* Newmark gamma of tissue and needle; beta = (gamma + 1/2)^2 / 4 */
+    int remesh;   /* remesh at the tip (the path then ends at the tip node) */
 } SceneDef;
 
 typedef struct Scene {
@@ -51,8 +52,8 @@ typedef struct Scene {
  * (ten-trial failures), against +S- at every step size with 0.55 (docs/coupling.md). */
 static SceneDef default_scene(void)
 {
-    SceneDef d = {0.024, 0.012, 12, 6, 0.0, 0.0, 2, 6, -1, 4, 20.0, {0.0, 0.0}, NS_COUPLED_SCHUR,
-                  0.0,   0.55};
+    SceneDef d = {0.024, 0.012, 12, 6,   0.0,  0.0, 2, 6, -1, 4, 20.0, {0.0, 0.0},
+                  NS_COUPLED_SCHUR, 0.0, 0.55, 0};
     return d;
 }
 
@@ -136,7 +137,7 @@ static int scene_make(Scene *s, const SceneDef *d, NsValidateResult *r)
     s->init |= 2;
     NsNeedlePath np_;
     double tip_s = d->tip_node < 0 ? 2.0 * d->len : tip * h;
-    rc = ns_needle_path_init(&np_, M, path, np, tip_s, err, sizeof err);
+    rc = ns_needle_path_init(&np_, M, path, d->remesh ? tip + 1 : np, tip_s, err, sizeof err);
     free(path);
     if (rc)
         return fail(r, err);
@@ -146,6 +147,7 @@ static int scene_make(Scene *s, const SceneDef *d, NsValidateResult *r)
     cp.cut_force[1] = d->cut[1];
     cp.solver = d->solver;
     cp.eta = d->eta;
+    cp.remesh = d->remesh;
     if (ns_coupled_init(&s->cpl, &s->tissue, &s->rod, &np_, &cp, err, sizeof err))
         return fail(r, err);
     s->init |= 4;
@@ -284,6 +286,8 @@ typedef struct StepLog {
     int coupled, n_static, n_pos, n_neg, trials, consistent, cutting;
     double axial, tip[3], l_in;
     double tip_s; /* the tip's material depth along the path [m] */
+    int remesh_kind;
+    double min_dihedral, max_dihedral;
 } StepLog;
 
 /* Steps the scene with the sleeve's insertion speed v[k] at step k, logging each step. */
@@ -306,12 +310,16 @@ static int drive(Scene *s, double dt, int steps, const double *v, StepLog *log, 
         memcpy(g->tip, s->rod.x + 3 * (s->rod.nodes - 1), sizeof g->tip);
         g->l_in = length_inside(s);
         g->tip_s = s->cpl.path.tip_s;
+        g->remesh_kind = st.remesh_kind;
+        g->min_dihedral = st.min_dihedral_deg;
+        g->max_dihedral = st.max_dihedral_deg;
         if (getenv("NS_VALIDATE_TRACE"))
             fprintf(stderr,
                     "%4d v %+.4f coupled %2d S %2d + %2d - %2d trials %2d cons %d cut %d "
-                    "axial %+.5f tip %.6f s %.6f l_in %.5f\n",
+                    "axial %+.5f tip %.6f s %.6f l_in %.5f remesh %d dihedral %.1f %.1f\n",
                     k, v[k], g->coupled, g->n_static, g->n_pos, g->n_neg, g->trials, g->consistent,
-                    g->cutting, g->axial, g->tip[0], g->tip_s, g->l_in);
+                    g->cutting, g->axial, g->tip[0], g->tip_s, g->l_in, g->remesh_kind,
+                    g->min_dihedral, g->max_dihedral);
     }
     return 0;
 }

@@ -3,6 +3,7 @@
  * the needle reparameterization of §3.4.2 after each step. */
 #include "coupling.h"
 #include "coupling_internal.h"
+#include "quality.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -166,7 +167,16 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
         return -1;
     }
     c->path = *path;
+    c->path_cap = path->count;
     *path = (NsNeedlePath){0};
+    ns_remesh_stack_init(&c->remesh);
+    c->remesh_hint = -1;
+    if (q->remesh && (c->path.through || c->path.tip_s < c->path.s[c->path.count - 1] - 1e-12)) {
+        snprintf(err, (size_t)err_sz,
+                 "coupling: with remeshing the needle's tip must sit at the path's last node");
+        ns_coupled_free(c);
+        return -1;
+    }
     if (q->solver == NS_COUPLED_SCHUR && !(c->schur = coupled_schur_create())) {
         snprintf(err, (size_t)err_sz, "coupling: out of memory");
         ns_coupled_free(c);
@@ -226,6 +236,7 @@ void ns_coupled_free(NsCoupled *c)
     free(c->state);
     free(c->work);
     coupled_schur_destroy(c->schur);
+    ns_remesh_stack_free(&c->remesh);
     memset(c, 0, sizeof *c);
 }
 
@@ -398,6 +409,122 @@ static int paper_lcp(CoupledSystem *S, NsCouplingStats *st)
  * new polyline, scaled so the tip keeps the old total (the needle is not perfectly
  * inextensible), and the rod's quantities are carried across (ns_rod_resample), then too long
  * free edges split and too short ones merged. Friction states go to the nearest old node. */
+/* Worst and largest dihedral angles of the tets around the path's last three nodes. */
+static void tip_dihedrals(const NsCoupled *c, NsCouplingStats *st)
+{
+    const NsMesh *M = &c->tissue->mesh;
+    const NsNeedlePath *p = &c->path;
+    st->min_dihedral_deg = 180.0;
+    st->max_dihedral_deg = 0.0;
+    for (int k = p->count - 1; k >= 0 && k >= p->count - 3; k--) {
+        const NsIntList *l = &M->node_tets[p->node[k]];
+        for (int i = 0; i < l->count; i++) {
+            const int *tn = M->tet_node + 4 * l->items[i];
+            double d[6];
+            ns_tet_dihedrals(M->u + 3 * tn[0], M->u + 3 * tn[1], M->u + 3 * tn[2], M->u + 3 * tn[3],
+                             d);
+            for (int j = 0; j < 6; j++) {
+                st->min_dihedral_deg = fmin(st->min_dihedral_deg, d[j]);
+                st->max_dihedral_deg = fmax(st->max_dihedral_deg, d[j]);
+            }
+        }
+    }
+}
+
+/* Algorithm 2 at the tip (§3.4.1): the needle tip's world position, located in the deformed
+ * tissue, gives its material position u_new; the tissue is remeshed so a node sits there and
+ * the needle's chain of tissue nodes (the path) follows; the tissue then syncs its arrays. */
+static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
+{
+    NsRod *r = c->rod;
+    NsTissue *T = c->tissue;
+    NsMesh *M = &T->mesh;
+    NsNeedlePath *p = &c->path;
+    int tipn = p->node[p->count - 1];
+    int start = c->remesh_hint >= 0        ? c->remesh_hint
+                : M->node_tets[tipn].count ? M->node_tets[tipn].items[0]
+                                           : -1;
+    double b[4];
+    int t = ns_mesh_locate_in(M, M->x, r->x + 3 * (r->nodes - 1), start, 1e-9, b);
+    if (t < 0)
+        return -1; /* the tip left the tissue: exits are not handled yet (docs/remeshing.md) */
+    double u_new[3] = {0, 0, 0};
+    for (int k = 0; k < 4; k++)
+        for (int i = 0; i < 3; i++)
+            u_new[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
+    /* A bevel tip (§3.5) cuts sideways: u_new moves by d tan(psi) along the tip frame's m2, d
+     * the distance the tip advanced through the material. (m2 is a world direction; the tissue
+     * around the tip is taken as locally unrotated for it.) */
+    if (r->params.tip == NS_TIP_BEVEL && c->state[r->nodes - 1] == NS_FRICTION_DYN_POS) {
+        double tt[3], m1[3], m2[3], d = 0.0;
+        ns_rod_tip_frame(r, tt, m1, m2);
+        for (int i = 0; i < 3; i++)
+            d += (u_new[i] - M->u[3 * tipn + i]) * (u_new[i] - M->u[3 * tipn + i]);
+        d = sqrt(d) * tan(r->params.bevel_angle);
+        for (int i = 0; i < 3; i++)
+            u_new[i] += d * m2[i];
+        if (ns_mesh_locate(M, u_new, t, 1e-9, NULL) < 0)
+            return -1;
+    }
+    /* The chain, tip first. */
+    int len = p->count;
+    if (p->count + 2 > c->path_cap) {
+        int cap = 2 * (p->count + 2);
+        int *nd = realloc(p->node, (size_t)cap * sizeof *nd);
+        if (!nd)
+            return -1;
+        p->node = nd;
+        double *sv = realloc(p->s, (size_t)cap * sizeof *sv);
+        if (!sv)
+            return -1;
+        p->s = sv;
+        c->path_cap = cap;
+    }
+    int *chain = malloc((size_t)(len + 2) * sizeof *chain);
+    if (!chain)
+        return -1;
+    for (int k = 0; k < len; k++)
+        chain[k] = p->node[len - 1 - k];
+    NsRemeshTip tip = {chain[0], chain[1], len > 2 ? chain[2] : -1,
+                       chain,    len,      c->state[r->nodes - 1] == NS_FRICTION_DYN_POS,
+                       false,    t};
+    NsRemeshResult res;
+    char err[256];
+    int rc = ns_remesh_tip(M, &c->remesh, &tip, u_new, &res, err, sizeof err);
+    if (rc == 0) {
+        if (res.dropped) {
+            chain[0] = res.tip;
+            if (len > 2 && chain[1] == res.tip) {
+                memmove(chain, chain + 1, (size_t)(len - 1) * sizeof *chain);
+                len--;
+            }
+        } else if (res.tip != chain[0]) {
+            memmove(chain + 1, chain, (size_t)len * sizeof *chain);
+            chain[0] = res.tip;
+            len++;
+        }
+        p->count = len;
+        for (int k = 0; k < len; k++)
+            p->node[k] = chain[len - 1 - k];
+        p->s[0] = 0.0;
+        for (int k = 1; k < len; k++) {
+            double d[3];
+            for (int i = 0; i < 3; i++)
+                d[i] = M->u[3 * p->node[k] + i] - M->u[3 * p->node[k - 1] + i];
+            p->s[k] = p->s[k - 1] + norm3(d);
+        }
+        p->tip_s = p->s[len - 1];
+        c->remesh_hint = tip.hint_tet;
+        st->remesh_kind = res.kind;
+        st->remesh_undone = res.undone;
+        st->remesh_candidates = res.candidates;
+        rc = ns_tissue_sync_topology(T, err, sizeof err);
+        st->cutting = res.kind != NS_REMESH_NONE && tip.penetrating;
+    }
+    free(chain);
+    return rc;
+}
+
 static int reparameterize(NsCoupled *c, NsCouplingStats *st)
 {
     NsRod *r = c->rod;
@@ -415,7 +542,13 @@ static int reparameterize(NsCoupled *c, NsCouplingStats *st)
     /* The tip's cut (or retreat): its slide along its tangent, mapped into material length on
      * its edge. */
     st->tip_slide = 0.0;
-    if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC) {
+    if (c->params.remesh) {
+        /* The tip's node follows the needle tip by remeshing (skipped while it sticks). */
+        if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC &&
+            remesh_tip(c, st))
+            return -1;
+        tip_dihedrals(c, st);
+    } else if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC) {
         double xp[3], t[3], d[3];
         tissue_point(c, n - 1, M->x, xp);
         for (int k = 0; k < 3; k++) {
@@ -792,6 +925,54 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     st.total_ms = now_ms() - t0;
     if (stats)
         *stats = st;
+    return 0;
+}
+
+int ns_coupled_check_structure(const NsCoupled *c, char *err, int err_sz)
+{
+    const NsMesh *M = &c->tissue->mesh;
+    const NsRod *r = c->rod;
+    if (ns_mesh_validate(M, err, err_sz))
+        return -1;
+    int prev = -1;
+    for (int i = 0; i < r->nodes; i++) {
+        if (c->ta[i] < 0)
+            continue;
+        /* A coupled needle node sits at a tissue node (the tip on a pre-laid path may sit on an
+         * edge: its weights then say where). */
+        int node = c->tw[i] == 0.0 ? c->ta[i] : c->tw[i] == 1.0 ? c->tb[i] : -1;
+        if (node < 0 && !(i == r->nodes - 1 && !c->params.remesh)) {
+            snprintf(err, (size_t)err_sz, "needle node %d is not at a tissue node", i);
+            return -1;
+        }
+        if (node >= 0 && !ns_mesh_node_alive(M, node)) {
+            snprintf(err, (size_t)err_sz, "needle node %d is coupled to dead tissue node %d", i,
+                     node);
+            return -1;
+        }
+        if (node >= 0 && prev >= 0) {
+            int joined = node == prev;
+            const NsIntList *l = &M->node_tets[node];
+            for (int j = 0; j < l->count && !joined; j++)
+                for (int k = 0; k < 4; k++)
+                    joined |= M->tet_node[4 * l->items[j] + k] == prev;
+            if (!joined) {
+                snprintf(err, (size_t)err_sz,
+                         "needle nodes %d and %d sit at tissue nodes %d and %d, which share no "
+                         "tissue edge",
+                         i - 1, i, prev, node);
+                return -1;
+            }
+        }
+        prev = node;
+    }
+    NsQualityStats q;
+    ns_mesh_quality(M, false, &q);
+    if (q.inverted > 0) {
+        snprintf(err, (size_t)err_sz, "%d tets inverted in material space (tet %d)", q.inverted,
+                 q.worst_tet);
+        return -1;
+    }
     return 0;
 }
 

@@ -42,6 +42,7 @@
 #include <stdint.h>
 
 #include "needle_path.h"
+#include "remesh.h"
 #include "rod.h"
 #include "solver.h"
 #include "tissue.h"
@@ -78,6 +79,10 @@ typedef struct NsCouplingParams {
      * tissue matrix, adopted at the next step (10: a factorization and its columns cost about
      * ten iterations; lower pays only with a second core, docs/coupling.md) */
     int refresh_iterations;
+    /* 0: the tip cuts along the pre-laid path (sim/needle_path.h); 1: the tissue is remeshed
+     * at the tip every step it slides (Algorithm 2, sim/remesh.h), the path then being the
+     * needle's chain of tissue nodes with the tip at its last node */
+    int remesh;
 } NsCouplingParams;
 
 NsCouplingParams ns_default_coupling_params(void);
@@ -100,6 +105,11 @@ typedef struct NsCouplingStats {
     int nan_count;      /* non-finite values caught (the step is rejected) */
     int inverted;       /* inverted tets after the step */
     int rod_splits, rod_merges;
+    /* remesh: the operation at the tip this step (NsRemeshKind, 0 none), whether the top of
+     * the stack was undone first, candidates scored, and the worst and largest dihedral angle
+     * of the tets around the needle's last three tissue nodes after it [deg] */
+    int remesh_kind, remesh_undone, remesh_candidates;
+    double min_dihedral_deg, max_dihedral_deg;
 } NsCouplingStats;
 
 typedef struct NsCoupled {
@@ -116,6 +126,9 @@ typedef struct NsCoupled {
     double *work; /* scratch */
     size_t work_cap;
     struct CoupledSchur *schur; /* our solver's state between steps (NS_COUPLED_SCHUR) */
+    NsRemeshStack remesh;       /* params.remesh: the undo stack of the tip's splits */
+    int remesh_hint;            /* a tet near the tip, where point location starts */
+    int path_cap;               /* entries allocated in path.node and path.s */
     uint64_t steps;
 } NsCoupled;
 
@@ -134,6 +147,12 @@ void ns_coupled_free(NsCoupled *c);
  * solve, non-finite values: the state is as before the step, stats say why). */
 int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
                     NsCouplingStats *stats);
+
+/* The structural checks of remeshing (issue 6): the tissue mesh valid, every coupled needle
+ * node at a tissue node (the tip of a pre-laid path may sit on an edge), consecutive coupled
+ * nodes joined by a tissue edge, no tet inverted in material space. O(tets). Returns 0, or -1
+ * with a message naming the first failure. */
+int ns_coupled_check_structure(const NsCoupled *c, char *err, int err_sz);
 
 /* Hash of the tissue's and the needle's states and the friction states. */
 uint64_t ns_coupled_state_hash(const NsCoupled *c);

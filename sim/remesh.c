@@ -12,15 +12,16 @@
 
 /* ---- geometry ---- */
 
-/* Barycentric coordinates of p in tet t (material space). Returns 0, or -1 for a flat tet. */
-static int tet_bary(const NsMesh *m, int t, const double p[3], double b[4])
+/* Barycentric coordinates of p in tet t with node coordinates X (m->u: material space, m->x:
+ * world space). Returns 0, or -1 for a flat tet. */
+static int tet_bary(const NsMesh *m, const double *X, int t, const double p[3], double b[4])
 {
     const int *tn = m->tet_node + 4 * t;
-    const double *u0 = m->u + 3 * tn[0];
+    const double *u0 = X + 3 * tn[0];
     double A[9], r[3];
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++)
-            A[3 * i + j] = m->u[3 * tn[j + 1] + i] - u0[i];
+            A[3 * i + j] = X[3 * tn[j + 1] + i] - u0[i];
         r[i] = p[i] - u0[i];
     }
     double det = A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
@@ -48,6 +49,12 @@ static double min4(const double b[4])
 
 int ns_mesh_locate(const NsMesh *m, const double p[3], int start, double tol, double bary[4])
 {
+    return ns_mesh_locate_in(m, m->u, p, start, tol, bary);
+}
+
+int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+                      double bary[4])
+{
     double b[4];
     int t = start;
     if (!ns_mesh_tet_alive(m, t))
@@ -55,7 +62,7 @@ int ns_mesh_locate(const NsMesh *m, const double p[3], int start, double tol, do
             ;
     /* Walk across the face opposite the most negative coordinate. */
     for (int step = 0; step < 4 * m->tet_alive + 16 && ns_mesh_tet_alive(m, t); step++) {
-        if (tet_bary(m, t, p, b))
+        if (tet_bary(m, X, t, p, b))
             break;
         int k = 0;
         for (int i = 1; i < 4; i++)
@@ -72,7 +79,7 @@ int ns_mesh_locate(const NsMesh *m, const double p[3], int start, double tol, do
     int best = -1;
     double best_min = -INFINITY;
     for (int e = 0; e < m->tet_slots; e++) {
-        if (!ns_mesh_tet_alive(m, e) || tet_bary(m, e, p, b))
+        if (!ns_mesh_tet_alive(m, e) || tet_bary(m, X, e, p, b))
             continue;
         if (min4(b) > best_min) {
             best_min = min4(b);

@@ -64,6 +64,10 @@ void ns_remesh_stack_free(NsRemeshStack *s);
  * walk fails. Points within tol (barycentric) of a tet count as inside. Returns -1 if p is
  * outside the mesh. */
 int ns_mesh_locate(const NsMesh *m, const double p[3], int start, double tol, double bary[4]);
+/* The same with the node coordinates X (3 node_slots): m->x locates a world point in the
+ * deformed mesh (its material point is then the same barycentric combination of m->u). */
+int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+                      double bary[4]);
 
 /* Splits the simplex of k nodes (2: edge, 3: face, 4: tet; every tet containing them) at
  * material point u and pushes the operation; the new node's world state is interpolated in

@@ -46,7 +46,7 @@ static double median(const double *v, int n)
 int main(int argc, char **argv)
 {
     const char *path = NS_SOURCE_DIR "/scenarios/brachytherapy.lua";
-    int steps = 60, threads = 1;
+    int steps = 60, threads = 1, remesh = 0;
     double dt = 5e-3;
     for (int a = 1; a < argc; a++) {
         if (strcmp(argv[a], "--steps") == 0 && a + 1 < argc)
@@ -55,11 +55,14 @@ int main(int argc, char **argv)
             dt = atof(argv[++a]);
         else if (strcmp(argv[a], "--threads") == 0 && a + 1 < argc)
             threads = atoi(argv[++a]);
+        else if (strcmp(argv[a], "--remesh") == 0)
+            remesh = 1;
         else if (argv[a][0] != '-')
             path = argv[a];
         else {
             fprintf(stderr,
-                    "usage: bench_coupling [SCENARIO.lua] [--steps N] [--dt S] [--threads N]\n");
+                    "usage: bench_coupling [SCENARIO.lua] [--steps N] [--dt S] [--threads N] "
+                    "[--remesh]\n");
             return 2;
         }
     }
@@ -83,7 +86,7 @@ int main(int argc, char **argv)
         a[0] = b[0] = off[o][0];
         a[1] = b[1] = off[o][1];
         a[2] = 0.0;
-        b[2] = 0.08;
+        b[2] = remesh ? 0.02 : 0.08; /* remesh: only the entry track is laid */
         np = ns_needle_path_lay(&sc.mesh, a, b, 0.75, nodes, PATH_CAP, err, sizeof err);
     }
     if (np < 3) {
@@ -95,6 +98,10 @@ int main(int argc, char **argv)
     for (int i = 1; i < np; i++)
         if (fabs(sc.mesh.u[3 * nodes[i] + 2] - 0.03) < fabs(sc.mesh.u[3 * nodes[tipn] + 2] - 0.03))
             tipn = i;
+    if (remesh) {
+        tipn = np - 1; /* the tip at the track's end, the path ending there */
+        np = tipn + 1;
+    }
     const NsCoupledSolverKind kinds[KINDS] = {NS_COUPLED_SCHUR, NS_COUPLED_PAPER};
     NsTissueParams tp = ns_default_tissue_params();
     tp.gamma = 0.55;
@@ -105,6 +112,7 @@ int main(int argc, char **argv)
     rp.beta = tp.beta;
     NsCouplingParams cp = ns_default_coupling_params();
     cp.threads = threads;
+    cp.remesh = remesh;
     for (int r = 0; r < NS_COUPLING_MAX_REGIONS; r++)
         cp.cut_force[r] = 0.2;
     NsTissue t[KINDS];
@@ -118,6 +126,8 @@ int main(int argc, char **argv)
     enum { SERIES = 7 };
     double *buf = malloc((size_t)SERIES * KINDS * steps * sizeof *buf);
     int refactors[KINDS] = {0}, incons[KINDS] = {0}, unconv[KINDS] = {0}, maxt[KINDS] = {0};
+    int ops[KINDS][5] = {{0}};
+    double dih[2] = {180.0, 0.0};
     double worst_tip = 0.0;
     if (!buf) {
         fprintf(stderr, "bench_coupling: out of memory\n");
@@ -187,6 +197,14 @@ int main(int argc, char **argv)
             incons[k] += !st.consistent;
             unconv[k] += st.unconverged;
             maxt[k] = st.trials > maxt[k] ? st.trials : maxt[k];
+            ops[k][st.remesh_kind]++;
+            if (remesh && k == 0) {
+                dih[0] = st.min_dihedral_deg < dih[0] ? st.min_dihedral_deg : dih[0];
+                dih[1] = st.max_dihedral_deg > dih[1] ? st.max_dihedral_deg : dih[1];
+                char e2[256];
+                if (ns_coupled_check_structure(&c[k], e2, sizeof e2))
+                    fprintf(stderr, "bench_coupling: step %d: %s\n", i, e2);
+            }
         }
         const double *xa = rod[0].x + 3 * (rod[0].nodes - 1),
                      *xb = rod[1].x + 3 * (rod[1].nodes - 1);
@@ -211,6 +229,10 @@ int main(int argc, char **argv)
     }
     printf("median step, paper / schur: %.2fx; tips differ by at most %.2e m; tip depth %.1f mm\n",
            med[1] / med[0], worst_tip, 1e3 * rod[0].x[3 * (rod[0].nodes - 1) + 2]);
+    if (remesh)
+        printf("remesh (schur run): %d none, %d snaps, %d edge, %d face, %d tet splits; dihedral "
+               "angles near the needle in [%.1f, %.1f] deg\n",
+               ops[0][0], ops[0][1], ops[0][2], ops[0][3], ops[0][4], dih[0], dih[1]);
     rc = 0;
 done:
     for (int k = 0; k < made; k++) {
