@@ -108,7 +108,7 @@ static void couple_from_path(NsCoupled *c, int first, int keep_state)
 {
     NsRod *r = c->rod;
     const NsNeedlePath *p = &c->path;
-    int nb = ns_needle_path_behind(p);
+    int nb = c->outside ? 0 : ns_needle_path_behind(p);
     for (int i = 0; i < r->nodes; i++) {
         int k = i - first;
         uint8_t old = c->state[i];
@@ -117,7 +117,7 @@ static void couple_from_path(NsCoupled *c, int first, int keep_state)
         r->pinned[i] = 0;
         if (k >= 0 && k < nb) {
             c->ta[i] = c->tb[i] = p->node[k];
-        } else if (k == nb && i == r->nodes - 1 && !p->through) {
+        } else if (k == nb && i == r->nodes - 1 && !p->through && !c->outside) {
             double w;
             int e = ns_needle_path_tip(p, &w);
             c->ta[i] = p->node[e];
@@ -446,12 +446,32 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
                                            : -1;
     double b[4];
     int t = ns_mesh_locate_in(M, M->x, r->x + 3 * (r->nodes - 1), start, 1e-9, b);
-    if (t < 0)
-        return -1; /* the tip left the tissue: exits are not handled yet (docs/remeshing.md) */
+    int retracting = c->state[r->nodes - 1] == NS_FRICTION_DYN_NEG;
+    if (t < 0 && !(retracting && p->count == 2))
+        return -1; /* the tip left the tissue elsewhere: not handled yet (docs/remeshing.md) */
     double u_new[3] = {0, 0, 0};
-    for (int k = 0; k < 4; k++)
+    for (int k = 0; k < 4 && t >= 0; k++)
         for (int i = 0; i < 3; i++)
             u_new[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
+    if (retracting && p->count == 2) {
+        /* Withdrawn past the entry node (or out of the tissue): the needle leaves. Every split
+         * left is undone and every moved node goes back (the original mesh), nothing is
+         * coupled any more. */
+        const double *ue = M->u + 3 * p->node[0], *ut = M->u + 3 * tipn;
+        double along = 0.0;
+        for (int i = 0; i < 3; i++)
+            along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
+        if (t < 0 || along <= 0.0) {
+            while (c->remesh.count > 0)
+                if (ns_remesh_undo(M, &c->remesh))
+                    return -1;
+            ns_remesh_release_all(M, &c->remesh);
+            c->outside = 1;
+            st->exited = 1;
+            char err[256];
+            return ns_tissue_sync_topology(T, err, sizeof err);
+        }
+    }
     /* A bevel tip (§3.5) cuts sideways: u_new moves by d tan(psi) along the tip frame's m2, d
      * the distance the tip advanced through the material. (m2 is a world direction; the tissue
      * around the tip is taken as locally unrotated for it.) */
@@ -547,6 +567,10 @@ static int reparameterize(NsCoupled *c, NsCouplingStats *st)
         if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC &&
             remesh_tip(c, st))
             return -1;
+        if (c->outside) { /* withdrawn: the needle keeps its solved shape, coupled nowhere */
+            couple_from_path(c, 0, 0);
+            return 0;
+        }
         tip_dihedrals(c, st);
     } else if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC) {
         double xp[3], t[3], d[3];

@@ -109,6 +109,7 @@ typedef struct NsCouplingStats {
      * the stack was undone first, candidates scored, and the worst and largest dihedral angle
      * of the tets around the needle's last three tissue nodes after it [deg] */
     int remesh_kind, remesh_undone, remesh_candidates;
+    int exited; /* remesh: the needle was withdrawn out of the tissue this step */
     double min_dihedral_deg, max_dihedral_deg;
 } NsCouplingStats;
 
@@ -129,6 +130,7 @@ typedef struct NsCoupled {
     NsRemeshStack remesh;       /* params.remesh: the undo stack of the tip's splits */
     int remesh_hint;            /* a tet near the tip, where point location starts */
     int path_cap;               /* entries allocated in path.node and path.s */
+    int outside;                /* params.remesh: the needle was withdrawn out of the tissue */
     uint64_t steps;
 } NsCoupled;
 

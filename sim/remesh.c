@@ -307,6 +307,48 @@ static void set_node(NsMesh *m, int n, const double u[3], const double x[3], con
     memcpy(m->a + 3 * n, a, 3 * sizeof *a);
 }
 
+int ns_remesh_record_original(NsRemeshStack *s, int n, const double u[3])
+{
+    double u0[3];
+    if (ns_remesh_original(s, n, u0))
+        return 0;
+    if (s->snaps == s->snap_cap) {
+        int cap = s->snap_cap ? 2 * s->snap_cap : 16;
+        int *sn = realloc(s->snap_node, (size_t)cap * sizeof *sn);
+        if (sn)
+            s->snap_node = sn;
+        double *su = realloc(s->snap_u, (size_t)cap * 3 * sizeof *su);
+        if (su)
+            s->snap_u = su;
+        if (!sn || !su)
+            return -1;
+        s->snap_cap = cap;
+    }
+    s->snap_node[s->snaps] = n;
+    memcpy(s->snap_u + 3 * s->snaps, u, 3 * sizeof(double));
+    s->snaps++;
+    return 0;
+}
+
+void ns_remesh_release_all(NsMesh *m, NsRemeshStack *s)
+{
+    for (int i = 0; i < s->snaps; i++) {
+        int n = s->snap_node[i];
+        if (!ns_mesh_node_alive(m, n) || m->node_tets[n].count == 0)
+            continue;
+        double b[4], x[3], v[3], a[3];
+        const double *u0 = s->snap_u + 3 * i;
+        int loc = ns_mesh_locate(m, u0, m->node_tets[n].items[0], 1e-9, b);
+        if (loc >= 0) {
+            interp_state(m, loc, b, x, v, a);
+            set_node(m, n, u0, x, v, a);
+        } else {
+            memcpy(m->u + 3 * n, u0, 3 * sizeof *u0);
+        }
+    }
+    s->snaps = 0;
+}
+
 int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3])
 {
     if (!ns_mesh_node_alive(m, n) || m->node_tets[n].count == 0)
@@ -316,24 +358,8 @@ int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3])
     if (loc < 0)
         return -1;
     interp_state(m, loc, b, x, v, a);
-    double u0[3];
-    if (!ns_remesh_original(s, n, u0)) {
-        if (s->snaps == s->snap_cap) {
-            int cap = s->snap_cap ? 2 * s->snap_cap : 16;
-            int *sn = realloc(s->snap_node, (size_t)cap * sizeof *sn);
-            if (sn)
-                s->snap_node = sn;
-            double *su = realloc(s->snap_u, (size_t)cap * 3 * sizeof *su);
-            if (su)
-                s->snap_u = su;
-            if (!sn || !su)
-                return -1;
-            s->snap_cap = cap;
-        }
-        s->snap_node[s->snaps] = n;
-        memcpy(s->snap_u + 3 * s->snaps, m->u + 3 * n, 3 * sizeof(double));
-        s->snaps++;
-    }
+    if (ns_remesh_record_original(s, n, m->u + 3 * n))
+        return -1;
     set_node(m, n, u, x, v, a);
     return 0;
 }

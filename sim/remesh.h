@@ -82,6 +82,13 @@ int ns_remesh_undo(NsMesh *m, NsRemeshStack *s);
 int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3]);
 /* The original material position of a snapped node (1), or 0 if it was never snapped. */
 int ns_remesh_original(const NsRemeshStack *s, int n, double u[3]);
+/* Records u as node n's original material position (if none is recorded yet): for nodes moved
+ * before the remesher took over (a laid entry track), so that they go back when released.
+ * Returns 0, or -1 (memory). */
+int ns_remesh_record_original(NsRemeshStack *s, int n, const double u[3]);
+/* Puts every recorded node back at its original material position (world state interpolated
+ * there, as for a snap) and forgets the records: the needle has left the tissue. */
+void ns_remesh_release_all(NsMesh *m, NsRemeshStack *s);
 
 /* Needle tip state for Algorithm 2. */
 typedef struct NsRemeshTip {

@@ -24,7 +24,7 @@ fail() {
 
 CASES="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy
 rod-cantilever rod-buckling rod-twist rod-length rod-reparam friction-stick friction-slip
-friction-reversal puncture solver-agreement symmetric-straight"
+friction-reversal puncture solver-agreement symmetric-straight remesh-restore"
 
 # The whole suite, as JSON.
 "$BIN" validate --json >"$TMP/out.json" 2>"$TMP/err"
