@@ -462,9 +462,16 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         for (int i = 0; i < 3; i++)
             along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
         if (t < 0 || along <= 0.0) {
+            /* Algorithm 2 should have undone every split but the one that made the tip's node
+             * (undoing that one is the retraction's own last step). */
+            st->exit_undone = c->remesh.count - (c->remesh.count > 0 &&
+                                                 c->remesh.ops[c->remesh.count - 1].node == tipn);
             while (c->remesh.count > 0)
-                if (ns_remesh_undo(M, &c->remesh))
+                if (ns_remesh_undo(M, &c->remesh)) {
+                    char err2[256];
+                    ns_tissue_sync_topology(T, err2, sizeof err2);
                     return -1;
+                }
             ns_remesh_release_all(M, &c->remesh);
             c->outside = 1;
             st->exited = 1;
@@ -511,6 +518,12 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     NsRemeshResult res;
     char err[256];
     int rc = ns_remesh_tip(M, &c->remesh, &tip, u_new, &res, err, sizeof err);
+    if (rc != 0) {
+        /* Scoring may have grown the mesh's slots even though nothing was accepted: the
+         * tissue's arrays must follow before it is touched again. */
+        char err2[256];
+        ns_tissue_sync_topology(T, err2, sizeof err2);
+    }
     if (rc == 0) {
         if (res.dropped) {
             chain[0] = res.tip;
@@ -557,8 +570,14 @@ static int reparameterize(NsCoupled *c, NsCouplingStats *st)
             first = first < 0 ? i : first;
             last = i;
         }
-    if (first < 0)
-        return 0; /* outside the tissue: nothing is coupled */
+    if (first < 0) {
+        /* Outside the tissue: nothing is coupled. A withdrawn needle pushed back in would pass
+         * through the tissue unseen: re-entry is not handled yet, so it is an error. */
+        if (c->outside &&
+            ns_mesh_locate_in(M, M->x, r->x + 3 * (n - 1), c->remesh_hint, 1e-9, NULL) >= 0)
+            return -1;
+        return 0;
+    }
     /* The tip's cut (or retreat): its slide along its tangent, mapped into material length on
      * its edge. */
     st->tip_slide = 0.0;

@@ -266,21 +266,24 @@ int ns_remesh_split(NsMesh *m, NsRemeshStack *s, const int *simplex, int k, cons
     return node;
 }
 
+static void forget_original(NsRemeshStack *s, int n);
+
 int ns_remesh_undo(NsMesh *m, NsRemeshStack *s)
 {
     if (s->count == 0)
         return -1;
     NsRemeshOp *op = &s->ops[s->count - 1];
+    if (m->node_tets[op->node].count != op->added)
+        return -1; /* the node is used by tets the operation did not make: nothing changed */
     for (int i = op->added - 1; i >= 0; i--)
         ns_mesh_remove_tet(m, op->added_tet[i]);
-    if (m->node_tets[op->node].count != 0)
-        return -1; /* the node is used by tets the operation did not make */
     for (int i = op->removed - 1; i >= 0; i--) {
         const int *r = op->removed_tet + 6 * i;
         if (ns_mesh_add_tet(m, r + 2, r[1]) < 0)
             return -1;
     }
     ns_mesh_remove_node(m, op->node);
+    forget_original(s, op->node);
     free(op->removed_tet);
     free(op->added_tet);
     s->count--;
@@ -307,11 +310,26 @@ static void set_node(NsMesh *m, int n, const double u[3], const double x[3], con
     memcpy(m->a + 3 * n, a, 3 * sizeof *a);
 }
 
+/* Forgets node n's original position (its slot died with an undone split). */
+static void forget_original(NsRemeshStack *s, int n)
+{
+    for (int i = 0; i < s->snaps; i++)
+        if (s->snap_node[i] == n) {
+            s->snap_node[i] = s->snap_node[s->snaps - 1];
+            memcpy(s->snap_u + 3 * i, s->snap_u + 3 * (s->snaps - 1), 3 * sizeof(double));
+            s->snaps--;
+            return;
+        }
+}
+
 int ns_remesh_record_original(NsRemeshStack *s, int n, const double u[3])
 {
     double u0[3];
     if (ns_remesh_original(s, n, u0))
         return 0;
+    for (int i = 0; i < s->count; i++)
+        if (s->ops[i].node == n)
+            return 0; /* made by a split: undoing it removes the node, it has no original */
     if (s->snaps == s->snap_cap) {
         int cap = s->snap_cap ? 2 * s->snap_cap : 16;
         int *sn = realloc(s->snap_node, (size_t)cap * sizeof *sn);
@@ -627,7 +645,8 @@ static int breaks_chain(const NsRemeshTip *tip, const Candidate *c)
         int n = c->simplex[0], i = chain_index(tip, n);
         if (i < 0 || n == tip->u1)
             return 0;
-        return !(n == tip->u2 && (c->undo || c->release));
+        /* u2 takes the tip only if a node stays behind it (the chain never folds onto one). */
+        return !(n == tip->u2 && tip->u3 >= 0 && (c->undo || c->release));
     }
     for (int a = 0; a < c->kind; a++)
         for (int b = 0; b < c->kind; b++) {

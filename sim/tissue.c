@@ -56,6 +56,7 @@ void ns_tissue_free(NsTissue *t)
     free(t->force);
     free(t->dof_fixed);
     free(t->was_alive);
+    free(t->rest_region);
     free(t->work);
     ns_bsm_free(&t->K);
     ns_bsm_free(&t->D);
@@ -138,13 +139,16 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     t->tet_cap = nt > 0 ? nt : 1;
     t->node_cap = nn > 0 ? nn : 1;
     t->was_alive = calloc((size_t)t->node_cap, 1);
-    if (!t->was_alive) {
+    t->rest_region = calloc((size_t)t->tet_cap, sizeof *t->rest_region);
+    if (!t->was_alive || !t->rest_region) {
         ns_set_err(err, err_sz, "out of memory");
         ns_tissue_free(t);
         return -1;
     }
     for (int i = 0; i < nn; i++)
         t->was_alive[i] = (M->flags[i] & NS_NODE_ALIVE) != 0;
+    for (int e = 0; e < nt; e++)
+        t->rest_region[e] = ns_mesh_tet_alive(M, e) ? M->tet_region[e] : -1;
     return 0;
 }
 
@@ -171,7 +175,8 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             grow_zero((void **)&t->jvalid, old, cap, 1) ||
             grow_zero((void **)&t->jnew, old, cap, 1) ||
             grow_zero((void **)&t->tet_force, old, cap, 12 * sizeof(double)) ||
-            grow_zero((void **)&t->tet_jac, old, cap, 288 * sizeof(double))) {
+            grow_zero((void **)&t->tet_jac, old, cap, 288 * sizeof(double)) ||
+            grow_zero((void **)&t->rest_region, old, cap, sizeof(int))) {
             ns_set_err(err, err_sz, "out of memory");
             return -1;
         }
@@ -215,8 +220,10 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
                        r.W);
             return -1;
         }
-        if (memcmp(&r, &t->rest[e], sizeof r) != 0) {
+        /* A changed shape or material (a reused slot) invalidates the tet's Jacobians. */
+        if (memcmp(&r, &t->rest[e], sizeof r) != 0 || t->rest_region[e] != M->tet_region[e]) {
             t->rest[e] = r;
+            t->rest_region[e] = M->tet_region[e];
             t->jvalid[e] = 0;
         }
         double m4 = t->materials[M->tet_region[e]].density * r.W / 4.0;
