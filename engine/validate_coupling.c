@@ -52,8 +52,8 @@ typedef struct Scene {
  * (ten-trial failures), against +S- at every step size with 0.55 (docs/coupling.md). */
 static SceneDef default_scene(void)
 {
-    SceneDef d = {0.024, 0.012, 12, 6,   0.0,  0.0, 2, 6, -1, 4, 20.0, {0.0, 0.0},
-                  NS_COUPLED_SCHUR, 0.0, 0.55, 0};
+    SceneDef d = {0.024, 0.012, 12, 6, 0.0, 0.0, 2, 6, -1, 4, 20.0, {0.0, 0.0}, NS_COUPLED_SCHUR,
+                  0.0,   0.55,  0};
     return d;
 }
 

@@ -20,13 +20,9 @@
 #include "validate.h"
 
 typedef struct Insertion {
-    double len, width, h; /* block [m], grid spacing [m] */
-    double offset[2];     /* entry (y, z) off the block's centre line [m] */
-    NsTipKind tip;
-    double bevel_deg;
+    double len, width, h;    /* block [m], grid spacing [m] */
+    double offset[2];        /* entry (y, z) off the block's centre line [m] */
     double depth, speed, dt; /* insertion depth [m], sleeve speed [m/s], step [s] */
-    double twist_at;         /* depth at which the base turns 180 degrees (0: never) [m] */
-    double twist_rate;       /* [rad/s] */
 } Insertion;
 
 typedef struct Run {
@@ -36,7 +32,6 @@ typedef struct Run {
     double min_dihedral, max_dihedral;
     int structure_failures;
     char first_failure[300];
-    int twist_step; /* step at which the twist started (-1) */
     double tip_gap; /* largest distance between the needle's tip and its tissue node [m] */
 } Run;
 
@@ -65,7 +60,6 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
 {
     memset(run, 0, sizeof *run);
     run->min_dihedral = 180.0;
-    run->twist_step = -1;
     char err[256];
     NsMesh mesh;
     int nx = (int)lround(in->len / in->h), nyz = (int)lround(in->width / in->h);
@@ -110,8 +104,6 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     NsRodParams rp = ns_default_rod_params();
     rp.gamma = tp.gamma;
     rp.beta = tp.beta;
-    rp.tip = in->tip;
-    rp.bevel_angle = in->bevel_deg * M_PI / 180.0;
     double d1[3] = {0.0, 1.0, 0.0};
     NsRod rod;
     if (ns_rod_init(&rod, x, n, d1, 2, &rp, err, sizeof err)) {
@@ -135,14 +127,8 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     run->tip = malloc((size_t)steps * 3 * sizeof *run->tip);
     if (!run->tip)
         rc = fail(r, "out of memory");
-    double entry_x = e0[0];
     for (int k = 0; k < steps && rc == 0; k++) {
         rod.v_insert = in->speed;
-        double depth = rod.x[3 * (rod.nodes - 1)] - entry_x;
-        if (in->twist_at > 0.0 && depth >= in->twist_at && run->twist_step < 0)
-            run->twist_step = k;
-        double turned = run->twist_step >= 0 ? (k - run->twist_step) * in->dt * in->twist_rate : 0;
-        rod.twist_rate = run->twist_step >= 0 && turned < M_PI ? in->twist_rate : 0.0;
         NsCouplingStats st;
         if (ns_coupled_step(&c, in->dt, NULL, NULL, &st)) {
             const double *tp_ = rod.x + 3 * (rod.nodes - 1);
@@ -181,9 +167,7 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
 
 static Insertion default_insertion(void)
 {
-    Insertion in = {
-        0.1,  0.032, 0.004, {0.37 * 0.004, -0.23 * 0.004}, NS_TIP_SYMMETRIC, 0.0, 0.08, 0.02,
-        0.01, 0.0,   0.0};
+    Insertion in = {0.1, 0.032, 0.004, {0.37 * 0.004, -0.23 * 0.004}, 0.08, 0.02, 0.01};
     return in;
 }
 

@@ -519,19 +519,7 @@ static void add_response(const CoupledSchur *w, const CoupledSystem *S, const do
     }
 }
 
-/* out = H x on the free rows (fixed rows 0). */
-static void hmul(const CoupledSystem *S, const double *x, double *out)
-{
-    ns_bsm_mul_threads(S->At, x, out, S->threads);
-    ns_banded_mul(S->Ar, x + S->nt3, out + S->nt3);
-    for (int i = 0; i < S->nt3; i++)
-        if (S->tfixed[i])
-            out[i] = 0.0;
-    for (int i = 0; i < S->nr3; i++)
-        if (S->rfixed[i])
-            out[S->nt3 + i] = 0.0;
-}
-
+/* Zeroes the fixed DOFs' entries of a tissue-then-needle vector. */
 static void mask_fixed(const CoupledSystem *S, double *v)
 {
     for (int i = 0; i < S->nt3; i++)
@@ -540,6 +528,14 @@ static void mask_fixed(const CoupledSystem *S, double *v)
     for (int i = 0; i < S->nr3; i++)
         if (S->rfixed[i])
             v[S->nt3 + i] = 0.0;
+}
+
+/* out = H x on the free rows (fixed rows 0). */
+static void hmul(const CoupledSystem *S, const double *x, double *out)
+{
+    ns_bsm_mul_threads(S->At, x, out, S->threads);
+    ns_banded_mul(S->Ar, x + S->nt3, out + S->nt3);
+    mask_fixed(S, out);
 }
 
 static double sdot(const double *a, const double *b, int n)

@@ -1,6 +1,7 @@
-/* Needle-tissue coupling (sim/coupling.h): the coupled step of Algorithm 1 (without remeshing),
- * the friction model of §3.3 (Eq. 7-11), Algorithm 3's state search for the paper's solver, and
- * the needle reparameterization of §3.4.2 after each step. */
+/* Needle-tissue coupling (sim/coupling.h): the coupled step of Algorithm 1, the friction model of
+ * §3.3 (Eq. 7-11), Algorithm 3's state search with the paper's solver (ours is in
+ * coupled_schur.c), the tip remeshing call (Algorithm 2, sim/remesh.c) and the needle
+ * reparameterization of §3.4.2 after each step. */
 #include "coupling.h"
 #include "coupling_internal.h"
 #include "quality.h"

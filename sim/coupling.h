@@ -144,11 +144,15 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
                     const NsCouplingParams *params, char *err, int err_sz);
 void ns_coupled_free(NsCoupled *c);
 
-/* One step of Algorithm 1 without remeshing: forces and Jacobians (tissue, needle, rod controls
- * applied), the coupled solve with friction (Eq. 7, Algorithm 3), the Newmark update of both,
- * the tip's cut along the path, and the needle's reparameterization (§3.4.2). ext_tissue (3
- * node_slots) and ext_rod (3 nodes) may be NULL. Returns 0, or -1 (bad dt or control, a failed
- * solve, non-finite values: the state is as before the step, stats say why). */
+/* One step of Algorithm 1: forces and Jacobians (tissue, needle, rod controls applied), the
+ * coupled solve with friction (Eq. 7, Algorithm 3), the Newmark update of both, the tip's cut
+ * (along the pre-laid path, or by remeshing with params.remesh, Algorithm 2), and the needle's
+ * reparameterization (§3.4.2). ext_tissue (3 node_slots, which remeshing changes between steps)
+ * and ext_rod (3 nodes) may be NULL. Returns 0, or -1: a bad dt or control, a failed solve or
+ * non-finite values leave the state as before the step; a failure after the update (the
+ * reparameterization, remeshing: a tip that left the tissue other than by withdrawal, a
+ * withdrawn needle pushed back in) leaves the step's update applied and the tissue's arrays in
+ * step with its mesh. stats say why. */
 int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
                     NsCouplingStats *stats);
 

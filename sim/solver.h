@@ -108,8 +108,8 @@ long ns_solver_factor_count(const NsSolver *s);
  * not change until ns_solver_factor_adopt, so the results are the same either way. B and Z (ncols
  * columns of 3n) must stay alive and untouched until then. A pending refactorization is dropped.
  * Returns 0, or -1 (another pattern, no factor yet, memory: nothing scheduled). */
-int ns_solver_factor_async(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed,
-                           int ncols, const double *B, double *Z);
+int ns_solver_factor_async(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed, int ncols,
+                           const double *B, double *Z);
 /* Waits for the scheduled factorization and puts it in use. Returns 1 if it was adopted (then
  * *cols_ok says whether its columns were computed), 0 if none was pending or it failed (the old
  * factor stays). */

@@ -81,7 +81,7 @@ typedef struct NsTissue {
     uint8_t *was_alive;    /* (node_cap) node alive at the last init / sync */
     int *rest_region;      /* (tet_cap) region the tet's rest data and Jacobians are for */
     uint64_t kd_version;   /* topology version K and D were last gathered for */
-    int kd_valid;        /* 0: every block row of K and D must be gathered again */
+    int kd_valid;          /* 0: every block row of K and D must be gathered again */
     /* Work partition (§3.6.3), a function of the topology and the thread count only: part p
      * owns nodes part_nodes[part_node_start[p] .. part_node_start[p+1]) and tets likewise. */
     int part_count;
