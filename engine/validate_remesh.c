@@ -17,12 +17,19 @@
 #include "ns_config.h"
 #include "quality.h"
 #include "scenario.h"
+#include "svd3.h"
 #include "validate.h"
 
 typedef struct Insertion {
     double len, width, h;    /* block [m], grid spacing [m] */
     double offset[2];        /* entry (y, z) off the block's centre line [m] */
     double depth, speed, dt; /* insertion depth [m], sleeve speed [m/s], step [s] */
+    NsTipKind tip;
+    double bevel_deg; /* psi for a bevel tip [deg] */
+    int flexible;    /* 1: a solid nitinol needle of 0.83 mm (Webster et al. 2006); 0: 18 G steel */
+    double twist_at; /* depth at which the base turns 180 degrees (0: never) [m] */
+    double twist_rate; /* [rad/s] */
+    NsBevelModel bevel_model;
 } Insertion;
 
 typedef struct Run {
@@ -33,6 +40,7 @@ typedef struct Run {
     int structure_failures;
     char first_failure[300];
     double tip_gap; /* largest distance between the needle's tip and its tissue node [m] */
+    int twist_step; /* the step at which the twist began (-1: none) */
 } Run;
 
 static int fail(NsValidateResult *r, const char *why)
@@ -60,6 +68,7 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
 {
     memset(run, 0, sizeof *run);
     run->min_dihedral = 180.0;
+    run->twist_step = -1;
     char err[256];
     NsMesh mesh;
     int nx = (int)lround(in->len / in->h), nyz = (int)lround(in->width / in->h);
@@ -104,6 +113,14 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     NsRodParams rp = ns_default_rod_params();
     rp.gamma = tp.gamma;
     rp.beta = tp.beta;
+    rp.tip = in->tip;
+    rp.bevel_angle = in->bevel_deg * M_PI / 180.0;
+    if (in->flexible) {
+        rp.material.youngs = 50e9;
+        rp.material.outer_diameter = 0.83e-3;
+        rp.material.inner_diameter = 0.0;
+        rp.material.density = 6450.0;
+    }
     double d1[3] = {0.0, 1.0, 0.0};
     NsRod rod;
     if (ns_rod_init(&rod, x, n, d1, 2, &rp, err, sizeof err)) {
@@ -116,6 +133,7 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     cp.f_perlen = 10.0;
     cp.cut_force[0] = 0.05;
     cp.remesh = 1;
+    cp.bevel_model = in->bevel_model;
     NsCoupled c;
     if (ns_needle_path_init(&path, M, nodes, np, s, err, sizeof err) ||
         ns_coupled_init(&c, &tissue, &rod, &path, &cp, err, sizeof err)) {
@@ -123,14 +141,25 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
         ns_tissue_free(&tissue);
         return fail(r, err);
     }
-    int steps = (int)lround(in->depth / (in->speed * in->dt));
+    /* The sleeve drives the needle in by `depth`; a twist pauses the insertion while the base
+     * turns half a revolution (pause steps). */
+    int pause = in->twist_at > 0.0 ? (int)ceil(M_PI / (in->twist_rate * in->dt) - 1e-9) : 0;
+    int steps = (int)lround(in->depth / (in->speed * in->dt)) + pause;
     run->tip = malloc((size_t)steps * 3 * sizeof *run->tip);
     if (!run->tip)
         rc = fail(r, "out of memory");
+    double entry_x = e0[0], turned = 0.0;
     for (int k = 0; k < steps && rc == 0; k++) {
-        rod.v_insert = in->speed;
+        double depth = rod.x[3 * (rod.nodes - 1)] - entry_x;
+        if (in->twist_at > 0.0 && depth >= in->twist_at && run->twist_step < 0)
+            run->twist_step = k;
+        int twisting = run->twist_step >= 0 && turned < M_PI - 1e-9;
+        rod.v_insert = twisting ? 0.0 : in->speed;
+        rod.twist_rate = twisting ? fmin(in->twist_rate, (M_PI - turned) / in->dt) : 0.0;
+        turned += rod.twist_rate * in->dt;
         NsCouplingStats st;
-        if (ns_coupled_step(&c, in->dt, NULL, NULL, &st)) {
+        int src = ns_coupled_step(&c, in->dt, NULL, NULL, &st);
+        if (src) {
             const double *tp_ = rod.x + 3 * (rod.nodes - 1);
             snprintf(err, sizeof err,
                      "coupled step %d failed (tip at %.2f, %.2f, %.2f mm; nan %d, unconverged %d, "
@@ -153,10 +182,10 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
         run->tip_gap = fmax(run->tip_gap, sqrt((xt[0] - xr[0]) * (xt[0] - xr[0]) +
                                                (xt[1] - xr[1]) * (xt[1] - xr[1]) +
                                                (xt[2] - xr[2]) * (xt[2] - xr[2])));
-        if (getenv("NS_VALIDATE_TRACE") && k % 10 == 0)
-            fprintf(stderr, "%4d tip %.2f %.2f %.2f mm remesh %d\n", k,
+        if (getenv("NS_VALIDATE_TRACE"))
+            fprintf(stderr, "%4d tip %.3f %.3f %.3f mm remesh %d bevel force %.3f N\n", k,
                     1e3 * rod.x[3 * (rod.nodes - 1)], 1e3 * rod.x[3 * (rod.nodes - 1) + 1],
-                    1e3 * rod.x[3 * (rod.nodes - 1) + 2], st.remesh_kind);
+                    1e3 * rod.x[3 * (rod.nodes - 1) + 2], st.remesh_kind, st.bevel_force);
         run->steps = k + 1;
     }
     ns_coupled_free(&c);
@@ -167,7 +196,10 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
 
 static Insertion default_insertion(void)
 {
-    Insertion in = {0.1, 0.032, 0.004, {0.37 * 0.004, -0.23 * 0.004}, 0.08, 0.02, 0.01};
+    Insertion in = {0.1,           0.032, 0.004, {0.37 * 0.004, -0.23 * 0.004},
+                    0.08,          0.02,  0.01,  NS_TIP_SYMMETRIC,
+                    0.0,           0,     0.0,   0.0,
+                    NS_BEVEL_FORCE};
     return in;
 }
 
@@ -208,6 +240,74 @@ static int symmetric_straight(NsValidateResult *r)
     }
     free(run.tip);
     return rc;
+}
+
+/* Fits a circle to points p[0 .. n) (3D): the plane through their mean normal to the
+ * covariance's weakest direction, then Kasa's algebraic fit in it. Returns the radius, the RMS of
+ * the distances to the circle into *rms and the largest distance from the plane into *off. */
+static double fit_circle(const double *p, int n, double *rms, double *off)
+{
+    double c[3] = {0, 0, 0}, C[9] = {0}, V[9];
+    for (int k = 0; k < n; k++)
+        for (int i = 0; i < 3; i++)
+            c[i] += p[3 * k + i] / n;
+    for (int k = 0; k < n; k++)
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                C[3 * i + j] += (p[3 * k + i] - c[i]) * (p[3 * k + j] - c[j]);
+    ns_sym3_eigen(C, V);
+    int w = 0; /* the weakest direction: the plane's normal */
+    for (int i = 1; i < 3; i++)
+        if (C[4 * i] < C[4 * w])
+            w = i;
+    int a = (w + 1) % 3, b = (w + 2) % 3;
+    /* Kasa: x^2 + y^2 + D x + E y + F = 0 in least squares. */
+    double N[9] = {0}, rhs[3] = {0};
+    *off = 0.0;
+    for (int k = 0; k < n; k++) {
+        double d[3], x = 0, y = 0, z = 0;
+        for (int i = 0; i < 3; i++)
+            d[i] = p[3 * k + i] - c[i];
+        for (int i = 0; i < 3; i++) {
+            x += d[i] * V[3 * i + a];
+            y += d[i] * V[3 * i + b];
+            z += d[i] * V[3 * i + w];
+        }
+        *off = fmax(*off, fabs(z));
+        double row[3] = {x, y, 1.0}, t = -(x * x + y * y);
+        for (int i = 0; i < 3; i++) {
+            rhs[i] += row[i] * t;
+            for (int j = 0; j < 3; j++)
+                N[3 * i + j] += row[i] * row[j];
+        }
+    }
+    double det = N[0] * (N[4] * N[8] - N[5] * N[7]) - N[1] * (N[3] * N[8] - N[5] * N[6]) +
+                 N[2] * (N[3] * N[7] - N[4] * N[6]);
+    double sol[3];
+    for (int col = 0; col < 3; col++) {
+        double M[9];
+        memcpy(M, N, sizeof M);
+        for (int i = 0; i < 3; i++)
+            M[3 * i + col] = rhs[i];
+        sol[col] = (M[0] * (M[4] * M[8] - M[5] * M[7]) - M[1] * (M[3] * M[8] - M[5] * M[6]) +
+                    M[2] * (M[3] * M[7] - M[4] * M[6])) /
+                   det;
+    }
+    double cx = -0.5 * sol[0], cy = -0.5 * sol[1], R = sqrt(cx * cx + cy * cy - sol[2]);
+    double ss = 0.0;
+    for (int k = 0; k < n; k++) {
+        double d[3], x = 0, y = 0;
+        for (int i = 0; i < 3; i++)
+            d[i] = p[3 * k + i] - c[i];
+        for (int i = 0; i < 3; i++) {
+            x += d[i] * V[3 * i + a];
+            y += d[i] * V[3 * i + b];
+        }
+        double e = hypot(x - cx, y - cy) - R;
+        ss += e * e;
+    }
+    *rms = sqrt(ss / n);
+    return R;
 }
 
 /* Mean edge length of the mesh's tets (material space) [m]. */
@@ -371,11 +471,211 @@ static int remesh_restore(NsValidateResult *r)
     return rc;
 }
 
+static int bevel_arc(NsValidateResult *r)
+{
+    const double psi[3] = {15.0, 30.0, 45.0};
+    double R[3], rms[3], off[3], worst_rel = 0.0;
+    int failures = 0, rc = 0, splits = 0, snaps = 0, went = 1;
+    for (int j = 0; j < 3 && rc == 0; j++) {
+        Insertion in = default_insertion();
+        in.tip = NS_TIP_BEVEL;
+        in.bevel_deg = psi[j];
+        in.depth = 0.06;
+        in.offset[1] = -0.012; /* room for the bend towards +z (m2) */
+        in.flexible = 1;
+        Run run;
+        rc = insert(&in, &run, r);
+        if (rc == 0) {
+            R[j] = fit_circle(run.tip, run.steps, &rms[j], &off[j]);
+            worst_rel = fmax(worst_rel, rms[j] / R[j]);
+            /* The needle went in (95% of the 6 cm along x at least, the arc being shallow) and
+             * bent towards m2 (+z at the start). */
+            const double *p0 = run.tip, *p1 = run.tip + 3 * (run.steps - 1);
+            went = went && p1[0] - p0[0] >= 0.9 * in.depth && p1[2] > p0[2];
+            failures += run.structure_failures;
+            snaps += run.ops[1];
+            splits += run.ops[2] + run.ops[3] + run.ops[4];
+        }
+        free(run.tip);
+    }
+    if (rc == 0) {
+        int increasing = R[0] > R[1] && R[1] > R[2];
+        snprintf(r->metric, sizeof r->metric, "worst arc-fit RMS / radius");
+        r->value = worst_rel;
+        r->reference = 0.0;
+        r->error = worst_rel;
+        r->tolerance = 0.03;
+        r->pass = worst_rel <= r->tolerance && increasing && went && failures == 0;
+        ns_validate_detail(
+            r,
+            "bevel nitinol needle (0.83 mm), no twist, 6 cm into the gel block at 20 mm/s, 10 ms "
+            "steps; tip path radius %.1f / %.1f / %.1f mm (curvature %.2f / %.2f "
+            "/ %.2f 1/m) for bevel 15 / 30 / 45 deg (want increasing curvature); "
+            "RMS %.3f / %.3f / %.3f mm; out of plane %.3f / %.3f / %.3f mm; "
+            "%d snaps, %d splits; structural failures %d",
+            1e3 * R[0], 1e3 * R[1], 1e3 * R[2], 1.0 / R[0], 1.0 / R[1], 1.0 / R[2], 1e3 * rms[0],
+            1e3 * rms[1], 1e3 * rms[2], 1e3 * off[0], 1e3 * off[1], 1e3 * off[2], snaps, splits,
+            failures);
+    }
+    return rc;
+}
+
+/* The plane of points p[0 .. n) (their mean c and the covariance's directions: e[0..2] the
+ * strongest (along the path), e[3..5] the second, e[6..8] the normal). Returns the largest
+ * distance from the plane. */
+static double path_plane(const double *p, int n, double c[3], double e[9])
+{
+    double C[9] = {0}, V[9];
+    c[0] = c[1] = c[2] = 0.0;
+    for (int k = 0; k < n; k++)
+        for (int i = 0; i < 3; i++)
+            c[i] += p[3 * k + i] / n;
+    for (int k = 0; k < n; k++)
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                C[3 * i + j] += (p[3 * k + i] - c[i]) * (p[3 * k + j] - c[j]);
+    ns_sym3_eigen(C, V);
+    int o[3] = {0, 1, 2}; /* eigenvalues (C's diagonal) sorted descending */
+    for (int a = 0; a < 3; a++)
+        for (int b = a + 1; b < 3; b++)
+            if (C[4 * o[b]] > C[4 * o[a]]) {
+                int t = o[a];
+                o[a] = o[b];
+                o[b] = t;
+            }
+    for (int a = 0; a < 3; a++)
+        for (int i = 0; i < 3; i++)
+            e[3 * a + i] = V[3 * i + o[a]];
+    double off = 0.0;
+    for (int k = 0; k < n; k++) {
+        double z = 0.0;
+        for (int i = 0; i < 3; i++)
+            z += (p[3 * k + i] - c[i]) * e[6 + i];
+        off = fmax(off, fabs(z));
+    }
+    return off;
+}
+
+/* Curvature y'' of the parabola y = a + b s + c s^2 fitted in least squares to the samples
+ * with s0 <= s <= s1 (2c; 0 with fewer than 5 samples). *count: the samples used. */
+static double parabola_curvature(const double *s, const double *y, int n, double s0, double s1,
+                                 int *count)
+{
+    double N[9] = {0}, r[3] = {0};
+    *count = 0;
+    for (int k = 0; k < n; k++) {
+        if (s[k] < s0 || s[k] > s1)
+            continue;
+        double d = s[k] - s0, row[3] = {1.0, d, d * d};
+        for (int i = 0; i < 3; i++) {
+            r[i] += row[i] * y[k];
+            for (int j = 0; j < 3; j++)
+                N[3 * i + j] += row[i] * row[j];
+        }
+        (*count)++;
+    }
+    if (*count < 5)
+        return 0.0;
+    double det = N[0] * (N[4] * N[8] - N[5] * N[7]) - N[1] * (N[3] * N[8] - N[5] * N[6]) +
+                 N[2] * (N[3] * N[7] - N[4] * N[6]);
+    /* Cramer's rule for c, the third unknown. */
+    double c = (N[0] * (N[4] * r[2] - r[1] * N[7]) - N[1] * (N[3] * r[2] - r[1] * N[6]) +
+                r[0] * (N[3] * N[7] - N[4] * N[6])) /
+               det;
+    return 2.0 * c;
+}
+
+static int double_bend(NsValidateResult *r)
+{
+    Insertion in = default_insertion();
+    in.tip = NS_TIP_BEVEL;
+    in.bevel_deg = 45.0;
+    in.flexible = 1;
+    in.depth = 0.06;
+    in.twist_at = 0.03;
+    in.twist_rate = M_PI / 0.2; /* half a turn in 0.2 s, the insertion paused */
+    Run run;
+    int rc = insert(&in, &run, r);
+    if (rc == 0 && run.twist_step < 0)
+        rc = fail(r, "the twist depth was never reached");
+    if (rc == 0) {
+        /* Keep one sample per position: the paused steps repeat the tip. */
+        int n = run.steps;
+        double c[3], e[9], off = path_plane(run.tip, n, c, e);
+        double *s = calloc(2 * (size_t)n + 2, sizeof *s), *y = s ? s + n + 1 : NULL;
+        if (!s) {
+            free(run.tip);
+            return fail(r, "out of memory");
+        }
+        int m = 0;
+        double s_tw = 0.0;
+        for (int k = 0; k < n; k++) {
+            double a = 0.0, b = 0.0;
+            for (int i = 0; i < 3; i++) {
+                a += (run.tip[3 * k + i] - c[i]) * e[i];
+                b += (run.tip[3 * k + i] - c[i]) * e[3 + i];
+            }
+            if (k == run.twist_step)
+                s_tw = a;
+            if (m > 0 && a <= s[m - 1] + 1e-6)
+                continue;
+            s[m] = a;
+            y[m] = b;
+            m++;
+        }
+        /* The curvature of the path before the twist point (a parabola over its last 15 mm),
+         * and where it changes sign: the first window start s (10 mm windows, every sample
+         * from 10 mm before the twist on) from which every window's curvature has the other
+         * sign up to the path's end. */
+        int cnt;
+        if (m < 20)
+            m = 1; /* no path: every fit below is empty and the case fails */
+        double kb = parabola_curvature(s, y, m, s_tw - 0.015, s_tw, &cnt);
+        double kl = parabola_curvature(s, y, m, s[m - 1] - 0.015, s[m - 1], &cnt);
+        double s_change = HUGE_VAL;
+        for (int k = m - 1; k >= 0 && s[k] >= s_tw - 0.01; k--) {
+            if (s[k] + 0.01 > s[m - 1])
+                continue;
+            if (parabola_curvature(s, y, m, s[k], s[k] + 0.01, &cnt) * kb >= 0.0)
+                break;
+            s_change = s[k];
+        }
+        double dist = fabs(s_change - s_tw);
+        snprintf(r->metric, sizeof r->metric, "curvature sign change from the twist point [m]");
+        r->value = isfinite(dist) ? dist : -1.0;
+        r->reference = 0.0;
+        r->error = r->value;
+        r->tolerance = 5e-3;
+        r->pass = isfinite(dist) && dist <= r->tolerance && kb * kl < 0.0 && off <= 1e-3 &&
+                  run.structure_failures == 0;
+        ns_validate_detail(r,
+                           "bevel 45 deg nitinol needle 6 cm into the gel block, the base turned "
+                           "180 deg at 3 cm depth (the insertion paused 0.2 s): path curvature "
+                           "%.2f 1/m over the 15 mm before the twist point, %.2f 1/m over the "
+                           "last 15 mm; the curvature (10 mm windows) keeps the reversed sign "
+                           "from %.2f mm after the twist point on (want within 5 mm); out of "
+                           "plane %.3f mm (want <= 1 mm); remesh: %d snaps, %d edge, %d face, %d "
+                           "tet splits; dihedral angles near the needle in [%.1f, %.1f] deg; "
+                           "structural failures %d%s%s",
+                           kb, kl, 1e3 * (s_change - s_tw), 1e3 * off, run.ops[1], run.ops[2],
+                           run.ops[3], run.ops[4], run.min_dihedral, run.max_dihedral,
+                           run.structure_failures, run.structure_failures ? ": " : "",
+                           run.first_failure);
+        free(s);
+    }
+    free(run.tip);
+    return rc;
+}
+
 const NsValidateCase ns_validate_remesh_cases[] = {
     {"symmetric-straight", "symmetric needle inserted 8 cm: lateral tip deviation < 0.5 mm",
      symmetric_straight},
     {"remesh-restore", "needle in 6 cm and fully out: the original topology and node positions",
      remesh_restore},
+    {"bevel-arc", "bevel needle 6 cm, no twist: circular tip path, curvature grows with psi",
+     bevel_arc},
+    {"double-bend", "bevel needle, base turned 180 deg at half depth: the bend reverses there",
+     double_bend},
 };
 const int ns_validate_remesh_case_count =
     (int)(sizeof ns_validate_remesh_cases / sizeof ns_validate_remesh_cases[0]);

@@ -46,6 +46,9 @@ NsCouplingParams ns_default_coupling_params(void)
     p.solver = NS_COUPLED_SCHUR;
     p.threads = 1;
     p.refresh_iterations = 10;
+    p.bevel_model = NS_BEVEL_FORCE;
+    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
+        p.bevel_force[k] = 0.5; /* N: docs/remeshing.md (bevel steering) */
     return p;
 }
 
@@ -152,6 +155,7 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
         q->refresh_iterations < 0 ||
+        (q->bevel_model != NS_BEVEL_FORCE && q->bevel_model != NS_BEVEL_DISPLACEMENT) ||
         (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
@@ -483,7 +487,9 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     /* A bevel tip (§3.5) cuts sideways: u_new moves by d tan(psi) along the tip frame's m2, d
      * the distance the tip advanced through the material. (m2 is a world direction; the tissue
      * around the tip is taken as locally unrotated for it.) */
-    if (r->params.tip == NS_TIP_BEVEL && c->state[r->nodes - 1] == NS_FRICTION_DYN_POS) {
+    int bevel = r->params.tip == NS_TIP_BEVEL && c->params.bevel_model == NS_BEVEL_DISPLACEMENT &&
+                c->state[r->nodes - 1] == NS_FRICTION_DYN_POS;
+    if (bevel) {
         double tt[3], m1[3], m2[3], d = 0.0;
         ns_rod_tip_frame(r, tt, m1, m2);
         for (int i = 0; i < 3; i++)
@@ -552,6 +558,11 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         st->remesh_kind = res.kind;
         st->remesh_undone = res.undone;
         st->remesh_candidates = res.candidates;
+        /* The bevel's displacement is in material space only (§3.5, Figure 7b): the new tip
+         * node stays at the needle's tip in the world, so the tissue around it is strained
+         * towards m2 and pushes the tip there in the next steps. */
+        if (bevel && !res.dropped)
+            memcpy(M->x + 3 * res.tip, r->x + 3 * (r->nodes - 1), 3 * sizeof(double));
         rc = ns_tissue_sync_topology(T, err, sizeof err);
         st->cutting = res.kind != NS_REMESH_NONE && tip.penetrating;
     }
@@ -786,6 +797,68 @@ static void add_tissue_point_block(NsBlockMatrix *A, int a, int b, double w, con
         }
 }
 
+/* Our bevel model (NS_BEVEL_FORCE): while the tip cuts (DYNAMIC+ in the last step), a lateral
+ * force k_b tan(psi) along the tip frame's m2 on the needle's tip, and its reaction on the
+ * tissue at the point a quarter of the last path edge ahead of the tip's node along the tip
+ * tangent (barycentric shares of that tet's nodes other than the tip's own). The paper
+ * displaces u_new instead (§3.5, Figure 7); docs/remeshing.md compares them. Returns the
+ * lateral force [N] (0: none, -1: memory); *et / *er are then the caller's external forces
+ * copied and added to, to be freed (NULL when there is no force). */
+static double bevel_force(NsCoupled *c, const double *ext_tissue, const double *ext_rod,
+                          double **et, double **er)
+{
+    NsRod *r = c->rod;
+    NsMesh *M = &c->tissue->mesh;
+    int n = r->nodes;
+    *et = *er = NULL;
+    if (!c->params.remesh || c->outside || r->params.tip != NS_TIP_BEVEL ||
+        c->params.bevel_model != NS_BEVEL_FORCE || c->ta[n - 1] < 0 || c->path.count < 2 ||
+        c->state[n - 1] != NS_FRICTION_DYN_POS)
+        return 0.0;
+    int tn = c->path.node[c->path.count - 1], prev = c->path.node[c->path.count - 2];
+    if (M->node_tets[tn].count == 0)
+        return 0.0;
+    double t[3], m1[3], m2[3], q[3], b[4], d[3];
+    ns_rod_tip_frame(r, t, m1, m2);
+    for (int i = 0; i < 3; i++)
+        d[i] = M->x[3 * tn + i] - M->x[3 * prev + i];
+    double h = 0.25 * norm3(d);
+    for (int i = 0; i < 3; i++)
+        q[i] = M->x[3 * tn + i] + h * t[i];
+    int te = ns_mesh_locate_in(M, M->x, q, M->node_tets[tn].items[0], 1e-9, b);
+    if (te < 0)
+        return 0.0; /* nothing ahead: the tip is at the surface */
+    int reg = M->tet_region[te];
+    double kb = reg >= 0 && reg < NS_COUPLING_MAX_REGIONS ? c->params.bevel_force[reg] : 0.0;
+    double f = kb * tan(r->params.bevel_angle), wsum = 0.0;
+    for (int a = 0; a < 4; a++) {
+        if (M->tet_node[4 * te + a] == tn)
+            b[a] = 0.0;
+        wsum += b[a];
+    }
+    if (!(f != 0.0) || !(wsum > 0.0))
+        return 0.0;
+    size_t nt = 3 * (size_t)M->node_slots, nr = 3 * (size_t)n;
+    *et = calloc(nt, sizeof **et);
+    *er = calloc(nr, sizeof **er);
+    if (!*et || !*er) {
+        free(*et);
+        free(*er);
+        *et = *er = NULL;
+        return -1.0;
+    }
+    if (ext_tissue)
+        memcpy(*et, ext_tissue, nt * sizeof **et);
+    if (ext_rod)
+        memcpy(*er, ext_rod, nr * sizeof **er);
+    for (int i = 0; i < 3; i++) {
+        (*er)[3 * (n - 1) + i] += f * m2[i];
+        for (int a = 0; a < 4; a++)
+            (*et)[3 * M->tet_node[4 * te + a] + i] -= f * m2[i] * b[a] / wsum;
+    }
+    return f;
+}
+
 int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
                     NsCouplingStats *stats)
 {
@@ -799,8 +872,17 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     NsRodStats rs;
     memset(&rs, 0, sizeof rs);
     NsRodSystem sys;
+    double *bev_t, *bev_r;
+    st.bevel_force = bevel_force(c, ext_tissue, ext_rod, &bev_t, &bev_r);
+    if (st.bevel_force < 0.0) {
+        if (stats)
+            *stats = st;
+        return -1;
+    }
     double tn = now_ms();
-    if (ns_rod_begin_step(r, dt, ext_rod, &sys, &rs)) {
+    if (ns_rod_begin_step(r, dt, bev_r ? bev_r : ext_rod, &sys, &rs)) {
+        free(bev_t);
+        free(bev_r);
         st.nan_count = rs.nan_count;
         if (stats)
             *stats = st;
@@ -810,7 +892,9 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     double tt = now_ms();
     NsTissueStats ts;
     memset(&ts, 0, sizeof ts);
-    double *bt = ns_tissue_begin_step(T, dt, ext_tissue, &ts);
+    double *bt = ns_tissue_begin_step(T, dt, bev_t ? bev_t : ext_tissue, &ts);
+    free(bev_t);
+    free(bev_r);
     st.tissue_ms = now_ms() - tt;
     double tl = now_ms();
 

@@ -65,6 +65,19 @@ int ns_coupled_solver_parse(const char *name);
 
 #define NS_COUPLING_MAX_REGIONS 32
 
+/* How a bevel tip (NsRodParams.tip = NS_TIP_BEVEL, angle psi) steers when the tissue is remeshed
+ * at the tip (docs/remeshing.md compares the two). */
+typedef enum NsBevelModel {
+    /* Ours, the default: while the tip cuts, the tissue at the bevel pushes it along the tip
+     * frame's m2 with k_b tan(psi), k_b = bevel_force[region]; the tissue just ahead of the tip
+     * takes the reaction. The force does not depend on the mesh. */
+    NS_BEVEL_FORCE = 0,
+    /* The paper's (§3.5): u_new is displaced by d tan(psi) along m2 in material space only.
+     * The strain it leaves builds up at the tip's node to about (element size) tan(psi), so
+     * the steering depends on the element size. */
+    NS_BEVEL_DISPLACEMENT = 1,
+} NsBevelModel;
+
 typedef struct NsCouplingParams {
     double f_perlen; /* friction per unit length inside the tissue [N/m] */
     double eta;      /* viscous friction per unit length [N s/m^2] */
@@ -83,6 +96,8 @@ typedef struct NsCouplingParams {
      * at the tip every step it slides (Algorithm 2, sim/remesh.h), the path then being the
      * needle's chain of tissue nodes with the tip at its last node */
     int remesh;
+    NsBevelModel bevel_model;
+    double bevel_force[NS_COUPLING_MAX_REGIONS]; /* k_b by tissue region [N] (NS_BEVEL_FORCE) */
 } NsCouplingParams;
 
 NsCouplingParams ns_default_coupling_params(void);
@@ -98,6 +113,7 @@ typedef struct NsCouplingStats {
     int coupled;    /* coupling nodes this step */
     int n_static, n_dyn_pos, n_dyn_neg;
     int cutting;        /* the tip cut this step (DYNAMIC+ inside the tissue) */
+    double bevel_force; /* the bevel's lateral force on the tip this step (NS_BEVEL_FORCE) [N] */
     double axial_force; /* force the tissue puts on the needle along its axis, summed [N]:
                            negative = resisting insertion */
     double tip_slide;   /* the tip's slide through the tissue this step [m], + = forward */
