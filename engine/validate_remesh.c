@@ -1,9 +1,11 @@
 /* Validation cases for needle insertion with tip remeshing (sim/remesh.c, the coupled step with
- * params.remesh; docs/validation.md): a symmetric needle goes straight. Every step must pass
- * the structural checks (ns_coupled_check_structure). The bevel cases of issue 6 (bevel-arc,
- * double-bend) are not here yet (docs/remeshing.md).
+ * params.remesh; docs/validation.md): a symmetric needle goes straight; a bevel needle follows
+ * a circular arc whose curvature grows with the bevel angle (Webster et al. 2006); a half-depth
+ * twist of the base reverses the bend (double-bend); a needle in and out of the brachytherapy
+ * tissue restores its mesh, once (remesh-restore) and over 20 cycles (remesh-cycles). Every
+ * step must pass the structural checks (ns_coupled_check_structure).
  *
- * The scene: a gel block (corotational, E 30 kPa, nu 0.45) on a structured grid, its four side
+ * The gel scene: a gel block (corotational, E 30 kPa, nu 0.45) on a structured grid, its four side
  * faces clamped, the needle entering the x = 0 face along +x off the grid lines. The first
  * grid cell of the track is laid into the mesh (ns_needle_path_lay: the needle has punctured
  * the skin); from there the tip remeshes its way in. */

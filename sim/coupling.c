@@ -152,14 +152,17 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     c->rod = rod;
     c->params = params ? *params : ns_default_coupling_params();
     const NsCouplingParams *q = &c->params;
+    int bad_bevel = q->bevel_model != NS_BEVEL_FORCE && q->bevel_model != NS_BEVEL_DISPLACEMENT;
+    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
+        bad_bevel |= !(q->bevel_force[k] >= 0.0 && isfinite(q->bevel_force[k]));
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
-        q->refresh_iterations < 0 ||
-        (q->bevel_model != NS_BEVEL_FORCE && q->bevel_model != NS_BEVEL_DISPLACEMENT) ||
+        q->refresh_iterations < 0 || bad_bevel ||
         (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
-                 "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper");
+                 "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper, "
+                 "bevel model force or displacement with finite bevel forces >= 0");
         ns_needle_path_free(path); /* taken over, even on failure */
         return -1;
     }

@@ -170,6 +170,18 @@ static int init_checks(void)
     ENSURE(ns_coupled_init(&s.cpl, &s.tissue, &s.rod, &p, &cp, err, sizeof err) == -1);
     ENSURE(strstr(err, "solver") != NULL);
     scene_free(&s);
+    /* An unknown bevel model, a negative or NaN bevel force: refused. */
+    for (int k = 0; k < 3; k++) {
+        ENSURE(scene_parts(&s, 0.55, 1, &p) == 0);
+        cp = ns_default_coupling_params();
+        if (k == 0)
+            cp.bevel_model = (NsBevelModel)5;
+        else
+            cp.bevel_force[3] = k == 1 ? -0.1 : NAN;
+        ENSURE(ns_coupled_init(&s.cpl, &s.tissue, &s.rod, &p, &cp, err, sizeof err) == -1);
+        ENSURE(strstr(err, "bevel") != NULL);
+        scene_free(&s);
+    }
     /* Names. */
     ENSURE(ns_coupled_solver_parse("schur") == NS_COUPLED_SCHUR);
     ENSURE(ns_coupled_solver_parse("paper") == NS_COUPLED_PAPER);
