@@ -369,6 +369,8 @@ static int remesh_restore(NsValidateResult *r)
     int n = 4 + np;
     double x[3 * 72];
     const double *e0 = M->x + 3 * nodes[0];
+    /* The entry's depth, copied: remeshing may move the mesh's arrays. */
+    const double entry_z = e0[2];
     for (int i = 0; i < 4; i++) {
         x[3 * i] = e0[0];
         x[3 * i + 1] = e0[1];
@@ -410,7 +412,7 @@ static int remesh_restore(NsValidateResult *r)
     double depth = 0.0, dmin = 180.0, dmax = 0.0;
     char first[300] = "";
     for (int k = 0; k < 1200 && rc == 0 && !exited; k++) {
-        depth = rod.x[3 * (rod.nodes - 1) + 2] - e0[2];
+        depth = rod.x[3 * (rod.nodes - 1) + 2] - entry_z;
         if (in_steps == 0 && depth >= 0.06)
             in_steps = k;
         rod.v_insert = in_steps ? -0.02 : 0.02;
@@ -491,7 +493,7 @@ static int bevel_arc(NsValidateResult *r)
         if (rc == 0) {
             R[j] = fit_circle(run.tip, run.steps, &rms[j], &off[j]);
             worst_rel = fmax(worst_rel, rms[j] / R[j]);
-            /* The needle went in (95% of the 6 cm along x at least, the arc being shallow) and
+            /* The needle went in (90% of the 6 cm along x at least, the arcs being shallow) and
              * bent towards m2 (+z at the start). */
             const double *p0 = run.tip, *p1 = run.tip + 3 * (run.steps - 1);
             went = went && p1[0] - p0[0] >= 0.9 * in.depth && p1[2] > p0[2];
@@ -604,7 +606,11 @@ static int double_bend(NsValidateResult *r)
     if (rc == 0) {
         /* Keep one sample per position: the paused steps repeat the tip. */
         int n = run.steps;
-        double c[3], e[9], off = path_plane(run.tip, n, c, e);
+        double c[3], e[9], off = path_plane(run.tip, n, c, e), dir = 0.0;
+        for (int i = 0; i < 3; i++) /* the along axis points the way the needle went */
+            dir += (run.tip[3 * (n - 1) + i] - run.tip[i]) * e[i];
+        for (int i = 0; dir < 0.0 && i < 3; i++)
+            e[i] = -e[i];
         double *s = calloc(2 * (size_t)n + 2, sizeof *s), *y = s ? s + n + 1 : NULL;
         if (!s) {
             free(run.tip);
@@ -643,14 +649,14 @@ static int double_bend(NsValidateResult *r)
                 break;
             s_change = s[k];
         }
-        double dist = fabs(s_change - s_tw);
+        double dist = s_change - s_tw; /* a change before the twist does not count */
         snprintf(r->metric, sizeof r->metric, "curvature sign change from the twist point [m]");
         r->value = isfinite(dist) ? dist : -1.0;
         r->reference = 0.0;
         r->error = r->value;
         r->tolerance = 5e-3;
-        r->pass = isfinite(dist) && dist <= r->tolerance && kb * kl < 0.0 && off <= 1e-3 &&
-                  run.structure_failures == 0;
+        r->pass = isfinite(dist) && dist >= 0.0 && dist <= r->tolerance && kb * kl < 0.0 &&
+                  off <= 1e-3 && run.structure_failures == 0;
         ns_validate_detail(r,
                            "bevel 45 deg nitinol needle 6 cm into the gel block, the base turned "
                            "180 deg at 3 cm depth (the insertion paused 0.2 s): path curvature "
@@ -713,11 +719,15 @@ static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy,
         double a[3] = {of[0], of[1], 0.0}, b[3] = {of[0], of[1], 0.02};
         np = ns_needle_path_lay(M, a, b, 0.75, nodes, 64, err, err_sz);
     }
+    if (np >= 0 && np < 2)
+        ns_set_err(err, err_sz, "cycle %d: the entry track has fewer than 2 nodes", cycle);
     if (np < 2 || ns_tissue_sync_topology(tissue, err, err_sz))
         return -1;
     int n = 4 + np;
     double x[3 * 72];
     const double *e0 = M->x + 3 * nodes[0];
+    /* The entry's depth, copied: remeshing may move the mesh's arrays. */
+    const double entry_z = e0[2];
     for (int i = 0; i < 4; i++) {
         x[3 * i] = e0[0];
         x[3 * i + 1] = e0[1];
@@ -748,13 +758,14 @@ static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy,
     int rc = 0;
     for (int i = 0; i < orig->node_slots && rc == 0; i++)
         if (ns_mesh_node_alive(orig, i) && memcmp(orig->u + 3 * i, M->u + 3 * i, 24) != 0)
-            rc = ns_remesh_record_original(&c.remesh, i, orig->u + 3 * i);
+            if ((rc = ns_remesh_record_original(&c.remesh, i, orig->u + 3 * i)) != 0)
+                ns_set_err(err, err_sz, "out of memory");
     /* In at 40 mm/s, twisting, to the cycle's depth; then out until the needle has left. The
      * dihedral angles of the last 20 steps are only known once the needle is out: keep them. */
     double ring[20][2];
     int out_steps = 0;
     for (int k = 0; k < 1000 && rc == 0 && !cy->exited; k++) {
-        double depth = rod.x[3 * (rod.nodes - 1) + 2] - e0[2];
+        double depth = rod.x[3 * (rod.nodes - 1) + 2] - entry_z;
         if (cy->in_steps == 0 && depth >= cy->depth)
             cy->in_steps = k;
         rod.v_insert = cy->in_steps ? -0.04 : 0.04;
@@ -807,7 +818,7 @@ static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy,
 static int remesh_cycles(NsValidateResult *r)
 {
     NsScenario sc;
-    char err[1024];
+    char err[1024] = "";
     if (ns_scenario_load(NS_SOURCE_DIR "/scenarios/brachytherapy.lua", &sc, err, sizeof err))
         return fail(r, err);
     NsMesh orig;

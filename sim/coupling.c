@@ -564,7 +564,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         /* The bevel's displacement is in material space only (§3.5, Figure 7b): the new tip
          * node stays at the needle's tip in the world, so the tissue around it is strained
          * towards m2 and pushes the tip there in the next steps. */
-        if (bevel && !res.dropped)
+        if (bevel)
             memcpy(M->x + 3 * res.tip, r->x + 3 * (r->nodes - 1), 3 * sizeof(double));
         rc = ns_tissue_sync_topology(T, err, sizeof err);
         st->cutting = res.kind != NS_REMESH_NONE && tip.penetrating;

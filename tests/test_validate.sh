@@ -79,6 +79,8 @@ fi
 "$BIN" validate --list >"$TMP/list" 2>&1
 ok=1
 for c in $CASES $NOT_MET; do grep -q "^$c " "$TMP/list" || ok=0; done
+# ... and no case is left out of both lists (a new case must be run here or named as not met).
+[ "$(grep -c '^[a-z]' "$TMP/list")" = "$(echo $CASES $NOT_MET | wc -w)" ] || ok=0
 if [ $ok = 1 ]; then pass "--list"; else fail "--list" "$(cat "$TMP/list")"; fi
 
 # Usage errors: exit 2, nothing run.
