@@ -493,10 +493,16 @@ static int bevel_arc(NsValidateResult *r)
         if (rc == 0) {
             R[j] = fit_circle(run.tip, run.steps, &rms[j], &off[j]);
             worst_rel = fmax(worst_rel, rms[j] / R[j]);
-            /* The needle went in (90% of the 6 cm along x at least, the arcs being shallow) and
-             * bent towards m2 (+z at the start). */
+            /* The needle went in (its tip path at least 90% of the 6 cm driven) and bent
+             * towards m2 (+z at the start). */
             const double *p0 = run.tip, *p1 = run.tip + 3 * (run.steps - 1);
-            went = went && p1[0] - p0[0] >= 0.9 * in.depth && p1[2] > p0[2];
+            double walked = 0.0;
+            for (int k = 1; k < run.steps; k++) {
+                const double *a = run.tip + 3 * (k - 1), *b = run.tip + 3 * k;
+                walked += sqrt((b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]) +
+                               (b[2] - a[2]) * (b[2] - a[2]));
+            }
+            went = went && walked >= 0.9 * in.depth && p1[2] > p0[2];
             failures += run.structure_failures;
             snaps += run.ops[1];
             splits += run.ops[2] + run.ops[3] + run.ops[4];
