@@ -333,6 +333,64 @@ static double mean_edge(const NsMesh *m)
     return n ? sum / (double)n : 0.0;
 }
 
+/* The entry tracks of the brachytherapy cases: 2 cm from the perineum (z = 0) along +z, at
+ * lateral offsets tried in turn until the mesh takes one without inverting a tet
+ * (tests/bench_coupling.c uses the same). */
+static const double entry_offsets[8][2] = {{0.008, 0.0},     {-0.008, 0.0},  {0.010, -0.004},
+                                           {-0.010, -0.004}, {0.008, 0.004}, {-0.008, 0.004},
+                                           {0.012, 0.0},     {-0.012, 0.0}};
+
+/* A needle on the laid track nodes[0 .. np) of the brachytherapy tissue: four 5 mm edges held
+ * by the sleeve along -z, then the track; remeshing on, cutting force 0.2 N everywhere; a bevel
+ * of bevel_deg (0: symmetric). Nodes the track moved away from orig are recorded as moved, so
+ * they go back when the needle leaves. *entry_z: the entry's depth (copied: remeshing may move
+ * the mesh's arrays). Returns 0, or -1 with a message (nothing left to free). */
+static int brachy_needle(NsTissue *tissue, const NsMesh *orig, const int *nodes, int np,
+                         double bevel_deg, NsRod *rod, NsCoupled *c, double *entry_z, char *err,
+                         int err_sz)
+{
+    const NsMesh *M = &tissue->mesh;
+    double x[3 * 72];
+    const double *e0 = M->x + 3 * nodes[0];
+    *entry_z = e0[2];
+    for (int i = 0; i < 4; i++) {
+        x[3 * i] = e0[0];
+        x[3 * i + 1] = e0[1];
+        x[3 * i + 2] = e0[2] - 0.005 * (4 - i);
+    }
+    for (int i = 0; i < np; i++)
+        memcpy(x + 3 * (4 + i), M->x + 3 * nodes[i], 3 * sizeof *x);
+    NsRodParams rp = ns_default_rod_params();
+    rp.gamma = tissue->params.gamma;
+    rp.beta = tissue->params.beta;
+    if (bevel_deg > 0.0) {
+        rp.tip = NS_TIP_BEVEL;
+        rp.bevel_angle = bevel_deg * M_PI / 180.0;
+    }
+    double d1[3] = {1.0, 0.0, 0.0};
+    if (ns_rod_init(rod, x, 4 + np, d1, 2, &rp, err, err_sz))
+        return -1;
+    NsCouplingParams cp = ns_default_coupling_params();
+    cp.remesh = 1;
+    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
+        cp.cut_force[k] = 0.2;
+    NsNeedlePath path;
+    if (ns_needle_path_init(&path, M, nodes, np, track_length(M, nodes, np), err, err_sz) ||
+        ns_coupled_init(c, tissue, rod, &path, &cp, err, err_sz)) {
+        ns_rod_free(rod);
+        return -1;
+    }
+    for (int i = 0; i < orig->node_slots; i++)
+        if (ns_mesh_node_alive(orig, i) && memcmp(orig->u + 3 * i, M->u + 3 * i, 24) != 0 &&
+            ns_remesh_record_original(&c->remesh, i, orig->u + 3 * i)) {
+            ns_set_err(err, err_sz, "out of memory");
+            ns_coupled_free(c);
+            ns_rod_free(rod);
+            return -1;
+        }
+    return 0;
+}
+
 static int remesh_restore(NsValidateResult *r)
 {
     NsScenario sc;
@@ -346,13 +404,10 @@ static int remesh_restore(NsValidateResult *r)
     }
     uint64_t h0 = ns_mesh_topology_hash(&orig);
     double h = mean_edge(&orig);
-    /* The entry track: 2 cm from the perineum (z = 0) along +z, at the first lateral offset the
-     * mesh takes without inverting a tet (tests/bench_coupling.c uses the same). */
-    const double off[][2] = {{0.008, 0.0},   {-0.008, 0.0},   {0.010, -0.004}, {-0.010, -0.004},
-                             {0.008, 0.004}, {-0.008, 0.004}, {0.012, 0.0},    {-0.012, 0.0}};
     int nodes[64], np = -1;
-    for (size_t o = 0; o < sizeof off / sizeof off[0] && np < 2; o++) {
-        double a[3] = {off[o][0], off[o][1], 0.0}, b[3] = {off[o][0], off[o][1], 0.02};
+    for (int o = 0; o < 8 && np < 2; o++) {
+        const double *of = entry_offsets[o];
+        double a[3] = {of[0], of[1], 0.0}, b[3] = {of[0], of[1], 0.02};
         np = ns_needle_path_lay(&sc.mesh, a, b, 0.75, nodes, 64, err, sizeof err);
     }
     NsTissueParams tp = ns_default_tissue_params();
@@ -366,47 +421,14 @@ static int remesh_restore(NsValidateResult *r)
         return fail(r, np < 2 ? "no entry track could be laid" : err);
     }
     const NsMesh *M = &tissue.mesh;
-    int n = 4 + np;
-    double x[3 * 72];
-    const double *e0 = M->x + 3 * nodes[0];
-    /* The entry's depth, copied: remeshing may move the mesh's arrays. */
-    const double entry_z = e0[2];
-    for (int i = 0; i < 4; i++) {
-        x[3 * i] = e0[0];
-        x[3 * i + 1] = e0[1];
-        x[3 * i + 2] = e0[2] - 0.005 * (4 - i);
-    }
-    for (int i = 0; i < np; i++)
-        memcpy(x + 3 * (4 + i), M->x + 3 * nodes[i], 3 * sizeof *x);
-    NsRodParams rp = ns_default_rod_params();
-    rp.gamma = tp.gamma;
-    rp.beta = tp.beta;
-    double d1[3] = {1.0, 0.0, 0.0}, s = 0.0;
     NsRod rod;
-    if (ns_rod_init(&rod, x, n, d1, 2, &rp, err, sizeof err)) {
-        ns_tissue_free(&tissue);
-        ns_mesh_free(&orig);
-        return fail(r, err);
-    }
-    s = track_length(M, nodes, np);
-    NsCouplingParams cp = ns_default_coupling_params();
-    cp.remesh = 1;
-    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
-        cp.cut_force[k] = 0.2;
-    NsNeedlePath path;
     NsCoupled c;
-    if (ns_needle_path_init(&path, M, nodes, np, s, err, sizeof err) ||
-        ns_coupled_init(&c, &tissue, &rod, &path, &cp, err, sizeof err)) {
-        ns_rod_free(&rod);
+    double entry_z;
+    if (brachy_needle(&tissue, &orig, nodes, np, 0.0, &rod, &c, &entry_z, err, sizeof err)) {
         ns_tissue_free(&tissue);
         ns_mesh_free(&orig);
         return fail(r, err);
     }
-    /* The track's nodes were moved onto the line before the tissue was made: they go back when
-     * the needle leaves, like the nodes the remesher snaps. */
-    for (int i = 0; i < orig.node_slots && rc == 0; i++)
-        if (ns_mesh_node_alive(&orig, i) && memcmp(orig.u + 3 * i, M->u + 3 * i, 24) != 0)
-            rc = ns_remesh_record_original(&c.remesh, i, orig.u + 3 * i) ? fail(r, "memory") : 0;
     /* In at 20 mm/s to 6 cm deep, then out at 20 mm/s until the needle has left. */
     int ops[5] = {0}, failures = 0, steps = 0, in_steps = 0, exited = 0, left_on_stack = -1;
     double depth = 0.0, dmin = 180.0, dmax = 0.0;
@@ -717,11 +739,9 @@ static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy,
     NsMesh *M = &tissue->mesh;
     /* The entry track at one of the lateral offsets the mesh takes, a different one each
      * cycle where possible. */
-    const double off[][2] = {{0.008, 0.0},   {-0.008, 0.0},   {0.010, -0.004}, {-0.010, -0.004},
-                             {0.008, 0.004}, {-0.008, 0.004}, {0.012, 0.0},    {-0.012, 0.0}};
     int nodes[64], np = -1;
     for (int o = 0; o < 8 && np < 2; o++) {
-        const double *of = off[(cycle + o) % 8];
+        const double *of = entry_offsets[(cycle + o) % 8];
         double a[3] = {of[0], of[1], 0.0}, b[3] = {of[0], of[1], 0.02};
         np = ns_needle_path_lay(M, a, b, 0.75, nodes, 64, err, err_sz);
     }
@@ -729,43 +749,13 @@ static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy,
         ns_set_err(err, err_sz, "cycle %d: the entry track has fewer than 2 nodes", cycle);
     if (np < 2 || ns_tissue_sync_topology(tissue, err, err_sz))
         return -1;
-    int n = 4 + np;
-    double x[3 * 72];
-    const double *e0 = M->x + 3 * nodes[0];
-    /* The entry's depth, copied: remeshing may move the mesh's arrays. */
-    const double entry_z = e0[2];
-    for (int i = 0; i < 4; i++) {
-        x[3 * i] = e0[0];
-        x[3 * i + 1] = e0[1];
-        x[3 * i + 2] = e0[2] - 0.005 * (4 - i);
-    }
-    for (int i = 0; i < np; i++)
-        memcpy(x + 3 * (4 + i), M->x + 3 * nodes[i], 3 * sizeof *x);
-    NsRodParams rp = ns_default_rod_params();
-    rp.gamma = tissue->params.gamma;
-    rp.beta = tissue->params.beta;
-    rp.tip = NS_TIP_BEVEL; /* the twists steer it */
-    rp.bevel_angle = 30.0 * M_PI / 180.0;
-    double d1[3] = {1.0, 0.0, 0.0};
     NsRod rod;
-    if (ns_rod_init(&rod, x, n, d1, 2, &rp, err, err_sz))
-        return -1;
-    NsCouplingParams cp = ns_default_coupling_params();
-    cp.remesh = 1;
-    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
-        cp.cut_force[k] = 0.2;
-    NsNeedlePath path;
     NsCoupled c;
-    if (ns_needle_path_init(&path, M, nodes, np, track_length(M, nodes, np), err, err_sz) ||
-        ns_coupled_init(&c, tissue, &rod, &path, &cp, err, err_sz)) {
-        ns_rod_free(&rod);
+    double entry_z;
+    if (brachy_needle(tissue, orig, nodes, np, 30.0 /* the twists steer it */, &rod, &c, &entry_z,
+                      err, err_sz))
         return -1;
-    }
     int rc = 0;
-    for (int i = 0; i < orig->node_slots && rc == 0; i++)
-        if (ns_mesh_node_alive(orig, i) && memcmp(orig->u + 3 * i, M->u + 3 * i, 24) != 0)
-            if ((rc = ns_remesh_record_original(&c.remesh, i, orig->u + 3 * i)) != 0)
-                ns_set_err(err, err_sz, "out of memory");
     /* In at 40 mm/s, twisting, to the cycle's depth; then out until the needle has left. The
      * dihedral angles of the last 20 steps are only known once the needle is out: keep them. */
     double ring[20][2];
