@@ -804,23 +804,24 @@ static void add_tissue_point_block(NsBlockMatrix *A, int a, int b, double w, con
  * force k_b tan(psi) along the tip frame's m2 on the needle's tip, and its reaction on the
  * tissue at the point a quarter of the last path edge ahead of the tip's node along the tip
  * tangent (barycentric shares of that tet's nodes other than the tip's own). The paper
- * displaces u_new instead (§3.5, Figure 7); docs/remeshing.md compares them. Returns the
- * lateral force [N] (0: none, -1: memory); *et / *er are then the caller's external forces
- * copied and added to, to be freed (NULL when there is no force). */
-static double bevel_force(NsCoupled *c, const double *ext_tissue, const double *ext_rod,
-                          double **et, double **er)
+ * displaces u_new instead (§3.5, Figure 7); docs/remeshing.md compares them. *f: the lateral
+ * force [N] (0: none); *et / *er: the caller's external forces copied and added to, to be
+ * freed (NULL when there is no force). Returns 0, or -1 (memory). */
+static int bevel_force(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
+                       double **et, double **er)
 {
     NsRod *r = c->rod;
     NsMesh *M = &c->tissue->mesh;
     int n = r->nodes;
     *et = *er = NULL;
+    *f_out = 0.0;
     if (!c->params.remesh || c->outside || r->params.tip != NS_TIP_BEVEL ||
         c->params.bevel_model != NS_BEVEL_FORCE || c->ta[n - 1] < 0 || c->path.count < 2 ||
         c->state[n - 1] != NS_FRICTION_DYN_POS)
-        return 0.0;
+        return 0;
     int tn = c->path.node[c->path.count - 1], prev = c->path.node[c->path.count - 2];
     if (M->node_tets[tn].count == 0)
-        return 0.0;
+        return 0;
     double t[3], m1[3], m2[3], q[3], b[4], d[3];
     ns_rod_tip_frame(r, t, m1, m2);
     for (int i = 0; i < 3; i++)
@@ -830,7 +831,7 @@ static double bevel_force(NsCoupled *c, const double *ext_tissue, const double *
         q[i] = M->x[3 * tn + i] + h * t[i];
     int te = ns_mesh_locate_in(M, M->x, q, M->node_tets[tn].items[0], 1e-9, b);
     if (te < 0)
-        return 0.0; /* nothing ahead: the tip is at the surface */
+        return 0; /* nothing ahead: the tip is at the surface */
     int reg = M->tet_region[te];
     double kb = reg >= 0 && reg < NS_COUPLING_MAX_REGIONS ? c->params.bevel_force[reg] : 0.0;
     double f = kb * tan(r->params.bevel_angle), wsum = 0.0;
@@ -840,7 +841,7 @@ static double bevel_force(NsCoupled *c, const double *ext_tissue, const double *
         wsum += b[a];
     }
     if (!(f != 0.0) || !(wsum > 0.0))
-        return 0.0;
+        return 0;
     size_t nt = 3 * (size_t)M->node_slots, nr = 3 * (size_t)n;
     *et = calloc(nt, sizeof **et);
     *er = calloc(nr, sizeof **er);
@@ -848,7 +849,7 @@ static double bevel_force(NsCoupled *c, const double *ext_tissue, const double *
         free(*et);
         free(*er);
         *et = *er = NULL;
-        return -1.0;
+        return -1;
     }
     if (ext_tissue)
         memcpy(*et, ext_tissue, nt * sizeof **et);
@@ -859,7 +860,8 @@ static double bevel_force(NsCoupled *c, const double *ext_tissue, const double *
         for (int a = 0; a < 4; a++)
             (*et)[3 * M->tet_node[4 * te + a] + i] -= f * m2[i] * b[a] / wsum;
     }
-    return f;
+    *f_out = f;
+    return 0;
 }
 
 int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
@@ -876,8 +878,7 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     memset(&rs, 0, sizeof rs);
     NsRodSystem sys;
     double *bev_t, *bev_r;
-    st.bevel_force = bevel_force(c, ext_tissue, ext_rod, &bev_t, &bev_r);
-    if (st.bevel_force < 0.0) {
+    if (bevel_force(c, ext_tissue, ext_rod, &st.bevel_force, &bev_t, &bev_r)) {
         if (stats)
             *stats = st;
         return -1;
