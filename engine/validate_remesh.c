@@ -775,6 +775,10 @@ static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy,
         }
         cy->ops[st.remesh_kind]++;
         cy->exited = st.exited;
+        if (getenv("NS_VALIDATE_TRACE")) /* cycle, step, withdrawing, depth, op, undo, angles */
+            fprintf(stderr, "TR %d %d %d %.2f %d %d %.2f %.2f\n", cycle, k, cy->in_steps != 0,
+                    1e3 * depth, st.remesh_kind, st.remesh_undone, st.min_dihedral_deg,
+                    st.max_dihedral_deg);
         if (!cy->exited && !c.outside) {
             cy->dmin_all = fmin(cy->dmin_all, st.min_dihedral_deg);
             if (cy->in_steps)

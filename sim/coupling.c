@@ -408,15 +408,6 @@ static int paper_lcp(CoupledSystem *S, NsCouplingStats *st)
     return rc;
 }
 
-/* ---- reparameterization (§3.4.2) after the step ---- */
-
-/* Moves the tip along the path by its slide through the tissue this step (cutting forward,
- * retracting back), then rebuilds the needle's nodes: the held and free nodes before the entry
- * keep their solved positions, the coupled ones take their tissue points' positions, free
- * nodes past the exit theirs; every node is labelled by its distance from the base along the
- * new polyline, scaled so the tip keeps the old total (the needle is not perfectly
- * inextensible), and the rod's quantities are carried across (ns_rod_resample), then too long
- * free edges split and too short ones merged. Friction states go to the nearest old node. */
 /* Worst and largest dihedral angles of the tets around the path's last three nodes. */
 static void tip_dihedrals(const NsCoupled *c, NsCouplingStats *st)
 {
@@ -573,6 +564,15 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     return rc;
 }
 
+/* ---- reparameterization (§3.4.2) after the step ---- */
+
+/* Moves the tip along the path by its slide through the tissue this step (cutting forward,
+ * retracting back), then rebuilds the needle's nodes: the held and free nodes before the entry
+ * keep their solved positions, the coupled ones take their tissue points' positions, free
+ * nodes past the exit theirs; every node is labelled by its distance from the base along the
+ * new polyline, scaled so the tip keeps the old total (the needle is not perfectly
+ * inextensible), and the rod's quantities are carried across (ns_rod_resample), then too long
+ * free edges split and too short ones merged. Friction states go to the nearest old node. */
 static int reparameterize(NsCoupled *c, NsCouplingStats *st)
 {
     NsRod *r = c->rod;

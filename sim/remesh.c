@@ -481,6 +481,69 @@ static void reposition(NsMesh *m, int n, int pn, int b)
 #undef AT
 }
 
+/* Moves node n, which has just left the needle, to the material position that maximizes the
+ * worst quality of its tets (Algorithm 2 line 10: "freely optimize the position of u1"). The
+ * search is a compass search in 3D started from the better of where the node is and its
+ * original position (where it returns when the needle has left; ns_remesh_release_all); its
+ * world state is then interpolated at the new point. A boundary node stays: moving it would
+ * change the boundary. */
+static void place_free(NsMesh *m, const NsRemeshStack *s, int n, int allow_boundary)
+{
+    const NsIntList *l = &m->node_tets[n];
+    if (l->count == 0 || (m->flags[n] & NS_NODE_FIXED) ||
+        (!allow_boundary && node_on_boundary(m, n)))
+        return;
+    double *un = m->u + 3 * n, u_old[3], p[3], h = 0.0;
+    memcpy(u_old, un, sizeof u_old);
+    int ne = 0;
+    for (int i = 0; i < l->count; i++)
+        for (int k = 0; k < 4; k++) {
+            int o = m->tet_node[4 * l->items[i] + k];
+            if (o != n) {
+                double d2 = 0.0;
+                for (int j = 0; j < 3; j++)
+                    d2 += (m->u[3 * o + j] - un[j]) * (m->u[3 * o + j] - un[j]);
+                h += sqrt(d2);
+                ne++;
+            }
+        }
+    h = 0.25 * h / ne; /* a quarter of the mean length of the node's edges */
+    double best = node_min_quality(m, n), u0[3];
+    memcpy(p, un, sizeof p);
+    if (ns_remesh_original(s, n, u0)) {
+        memcpy(un, u0, sizeof u0);
+        double q = node_min_quality(m, n);
+        if (q > best) {
+            best = q;
+            memcpy(p, u0, sizeof p);
+        }
+    }
+    const double h_min = 1e-3 * h;
+    for (int it = 0; it < 200 && h > h_min; it++) {
+        int improved = 0;
+        for (int d = 0; d < 6 && !improved; d++) {
+            memcpy(un, p, sizeof p);
+            un[d / 2] += d % 2 ? -h : h;
+            double q = node_min_quality(m, n);
+            if (q > best) {
+                best = q;
+                memcpy(p, un, sizeof p);
+                improved = 1;
+            }
+        }
+        if (!improved)
+            h *= 0.5;
+    }
+    /* The world state at p, interpolated in the mesh as it was (n at its old place). */
+    memcpy(un, u_old, sizeof u_old);
+    double b[4], x[3], v[3], a[3];
+    int loc = ns_mesh_locate(m, p, l->items[0], 1e-9, b);
+    if (loc < 0)
+        return;
+    interp_state(m, loc, b, x, v, a);
+    set_node(m, n, p, x, v, a);
+}
+
 /* The region's tets (incident to the region nodes, alive now), their qualities sorted. */
 static int region_quality(const NsMesh *m, const int *nodes, int nn, double *q, int cap)
 {
@@ -563,17 +626,9 @@ static int apply(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Cand
     }
     ap->placed = placed;
     if (c->release) {
-        /* u1 leaves the needle: back to its original material position if it was snapped
-         * there, its world state interpolated at that point (as for a snap). */
-        double u0[3], b[4], x[3], v[3], a[3];
+        /* u1 leaves the needle and moves freely (line 10): to the best place for its tets. */
         node_save(m, tip->u1, &ap->released);
-        if (ns_remesh_original(s, tip->u1, u0)) {
-            int loc = ns_mesh_locate(m, u0, m->node_tets[tip->u1].items[0], 1e-9, b);
-            if (loc >= 0) {
-                interp_state(m, loc, b, x, v, a);
-                set_node(m, tip->u1, u0, x, v, a);
-            }
-        }
+        place_free(m, s, tip->u1, tip->allow_boundary);
     }
     /* The needle node behind the new tip slides to its best place on the segment, unless it
      * is fixed or on the boundary (moving it would change the boundary; skin entry allows). */

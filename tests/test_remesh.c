@@ -126,12 +126,26 @@ static int structure_ok(const NsMesh *m, const int *chain, int n)
     return q.inverted == 0;
 }
 
+/* Worst material quality of the tets around node n. */
+static double node_quality(const NsMesh *m, int n)
+{
+    double q = INFINITY;
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++) {
+        const int *tn = m->tet_node + 4 * l->items[i];
+        q = fmin(q, ns_tet_quality(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2],
+                                   m->u + 3 * tn[3]));
+    }
+    return q;
+}
+
 /* Drives the tip from the middle of the x = 0 face along dir into the block, `steps` steps of
  * `step` m, then back out, with the structural checks after every step. Counts the operations
  * into kinds; the worst region quality into *qmin; the worst and largest dihedral angle of the
- * whole mesh after the first 20 steps of the insertion into dmin / dmax. */
+ * whole mesh after the first 20 steps of the insertion into dmin / dmax; the tip nodes released
+ * in retraction into *released. The nodes the needle moved go back when it has left. */
 static int drive(NsMesh *m, const double dir3[3], int steps, double step, int kinds[5],
-                 double *qmin, double *dmin, double *dmax)
+                 double *qmin, double *dmin, double *dmax, int *released)
 {
     int n = (int)lround(cbrt((double)m->node_alive)) - 1; /* the grid's cells per side */
     int e = (n + 1) * (n / 2 + (n + 1) * (n / 2)), chain[512] = {e + 1, e}, len = 2;
@@ -153,12 +167,26 @@ static int drive(NsMesh *m, const double dir3[3], int steps, double step, int ki
             tip.chain = chain;
             tip.chain_len = len;
             tip.penetrating = dir > 0;
+            int old_u1 = chain[0];
             NsRemeshResult r;
             if (ns_remesh_tip(m, &s, &tip, u, &r, err, sizeof err)) {
                 fprintf(stderr, "  step %d dir %d: %s\n", k, dir, err);
                 return 1;
             }
             kinds[r.kind]++;
+            /* A tip node that left the needle in retraction (not undone) moved freely to a
+             * place at least as good for its tets as its original one (Algorithm 2 line 10). */
+            double u0[3];
+            if (dir < 0 && r.dropped && !r.undone && old_u1 != r.tip &&
+                ns_remesh_original(&s, old_u1, u0)) {
+                double q_now = node_quality(m, old_u1), keep[3];
+                memcpy(keep, m->u + 3 * old_u1, sizeof keep);
+                memcpy(m->u + 3 * old_u1, u0, sizeof u0);
+                double q_orig = node_quality(m, old_u1);
+                memcpy(m->u + 3 * old_u1, keep, sizeof keep);
+                ENSURE(q_now >= q_orig);
+                (*released)++;
+            }
             /* The chain: the tip replaces u1 if u1 left, else goes in front of it (or is u1). */
             if (r.dropped) {
                 chain[0] = r.tip;
@@ -184,6 +212,8 @@ static int drive(NsMesh *m, const double dir3[3], int steps, double step, int ki
                 *dmax = fmax(*dmax, q.max_dihedral_deg);
             }
         }
+    /* The needle has left: the nodes it moved go back (the coupled step does this at exit). */
+    ns_remesh_release_all(m, &s);
     ENSURE(s.count == 0); /* every split undone */
     ENSURE(len == 2);
     ns_remesh_stack_free(&s);
@@ -215,10 +245,12 @@ static int insert_and_retract_restores_topology(void)
     int kinds[5] = {0};
     double qmin = INFINITY, dmin = INFINITY, dmax = 0.0, back;
     const double dir3[3] = {1.0, 0.31, -0.17};
-    ENSURE(drive(&m, dir3, 16, 0.3 * H, kinds, &qmin, &dmin, &dmax) == 0);
+    int released = 0;
+    ENSURE(drive(&m, dir3, 16, 0.3 * H, kinds, &qmin, &dmin, &dmax, &released) == 0);
     printf("  16 steps each way: snaps %d, edge splits %d, face splits %d, tet splits %d; worst "
-           "region quality %.3f\n",
-           kinds[1], kinds[2], kinds[3], kinds[4], qmin);
+           "region quality %.3f; tip nodes released in retraction %d\n",
+           kinds[1], kinds[2], kinds[3], kinds[4], qmin, released);
+    ENSURE(released > 0);                       /* the free placement was exercised */
     ENSURE(kinds[2] + kinds[3] + kinds[4] > 0); /* it did cut */
     ENSURE(restored(&m, &orig, &back) == 0);
     printf("  nodes back within %.2e m (%.2e of the spacing)\n", back, back / H);
@@ -248,7 +280,8 @@ static int cycles_keep_quality_and_topology(void)
         double d0 = dmin, d1 = dmax;
         dmin = INFINITY;
         dmax = 0.0;
-        ENSURE(drive(&m, dir3, steps, 0.2 * H, kinds, &qmin, &dmin, &dmax) == 0);
+        int released = 0;
+        ENSURE(drive(&m, dir3, steps, 0.2 * H, kinds, &qmin, &dmin, &dmax, &released) == 0);
         if (dmin < lo || dmax > hi)
             printf("  cycle %d: dihedrals [%.1f, %.1f] deg, outside the paper's bounds\n", c, dmin,
                    dmax);
