@@ -692,8 +692,8 @@ static int chain_index(const NsRemeshTip *tip, int n)
 }
 
 /* Would the candidate move a needle node off the needle or split a needle segment? Snapping is
- * allowed for u1 (the tip snap) and for u2 when u1 leaves (undo or retraction); a split may not
- * contain two consecutive needle nodes, except u1-u2 in a retraction (the tip backs into it). */
+ * allowed for u1 (the tip snap) and for u2 when u1 leaves (undo or release); a split may not
+ * contain two consecutive needle nodes, except u1-u2 when u1 leaves (released, or undone). */
 static int breaks_chain(const NsRemeshTip *tip, const Candidate *c)
 {
     if (c->kind == NS_REMESH_SNAP) {
@@ -708,8 +708,8 @@ static int breaks_chain(const NsRemeshTip *tip, const Candidate *c)
             int ia = chain_index(tip, c->simplex[a]), ib = chain_index(tip, c->simplex[b]);
             if (ia < 0 || ib != ia + 1)
                 continue;
-            if (!tip->penetrating && !c->undo && ia == 0)
-                continue; /* retraction into the u1-u2 segment */
+            if (c->release && ia == 0)
+                continue; /* u1 leaves: the placed node may sit on the u1-u2 segment */
             if (c->undo && ia == 0)
                 continue; /* u1 is gone after the undo */
             return 1;
@@ -749,6 +749,19 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             c.seg_b = u2;
             cand[nc++] = c;
         }
+        /* Our addition: when u1 was placed by a snap, it may leave the needle (as a split u1 is
+         * undone, lines 6-8), moving freely; a node at u_new joined to (or being) u2, which
+         * slides on [u_new, u3]. Without it a snapped tip can only drag its node along. */
+        if (!top_made_u1 && u3 >= 0)
+            for (int i = 0; i < ns && nc < 64; i++) {
+                if (std[i].kind == NS_REMESH_SNAP && std[i].simplex[0] == u1)
+                    continue;
+                Candidate c = std[i];
+                c.release = 1;
+                c.move = u2;
+                c.seg_b = u3;
+                cand[nc++] = c;
+            }
     } else if (!top_made_u1) {
         /* Line 10: a node at u_new joined to (or being) u2; u1 leaves the needle. */
         for (int i = 0; i < ns; i++) {

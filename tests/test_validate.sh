@@ -29,7 +29,11 @@ friction-reversal puncture solver-agreement symmetric-straight remesh-restore be
 # Cases whose bar is not met yet (issue 6 stays open; docs/remeshing.md gives the figures):
 # listed by --list and runnable, not required to pass here. Not a way to hide a failure: a case
 # moves up to CASES when it passes.
-NOT_MET="double-bend remesh-cycles"
+NOT_MET="double-bend"
+# Passing cases run by their own meson test (tests/meson.build: validate-cycles, ~4 min), so that
+# it runs beside this one; it is not defined in the sanitizer build (~20 min there), whose
+# remeshing is covered by remesh-restore here and the unit test's cycles.
+SEPARATE="remesh-cycles"
 
 # The suite's passing cases, as JSON.
 "$BIN" validate $CASES --json >"$TMP/out.json" 2>"$TMP/err"
@@ -78,9 +82,9 @@ fi
 # --list names every case.
 "$BIN" validate --list >"$TMP/list" 2>&1
 ok=1
-for c in $CASES $NOT_MET; do grep -q "^$c " "$TMP/list" || ok=0; done
-# ... and no case is left out of both lists (a new case must be run here or named as not met).
-[ "$(grep -c '^[a-z]' "$TMP/list")" = "$(echo $CASES $NOT_MET | wc -w)" ] || ok=0
+for c in $CASES $NOT_MET $SEPARATE; do grep -q "^$c " "$TMP/list" || ok=0; done
+# ... and no case is left out of the lists (a new case must be run or named as not met).
+[ "$(grep -c '^[a-z]' "$TMP/list")" = "$(echo $CASES $NOT_MET $SEPARATE | wc -w)" ] || ok=0
 if [ $ok = 1 ]; then pass "--list"; else fail "--list" "$(cat "$TMP/list")"; fi
 
 # Usage errors: exit 2, nothing run.
