@@ -19,7 +19,9 @@ static const char usage[] =
     "\n"
     "  needlesim check SCENARIO.lua [--json] [--mesh-out FILE.vtu|FILE.msh]\n"
     "      run the scenario, build its tissue mesh and print mesh and model statistics\n"
-    "  needlesim run SCENARIO.lua [-o DIR] [...]          (not available in this version yet)\n"
+    "  needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME] [--quiet]\n"
+    "      run the scenario's script, score its targets, write DIR/report.json and\n"
+    "      DIR/trajectory.csv\n"
     "  needlesim validate [CASE...] [--json] [--list]\n"
     "      run the built-in validation cases (docs/validation.md); exit 1 if any fails\n"
     "  needlesim bench SCENARIO.lua [...]                 (not available in this version yet)\n"
@@ -62,7 +64,9 @@ int main(int argc, char **argv)
         return ns_cmd_check(argc - 1, argv + 1);
     if (strcmp(cmd, "validate") == 0)
         return ns_cmd_validate(argc - 1, argv + 1);
-    if (strcmp(cmd, "run") == 0 || strcmp(cmd, "bench") == 0) {
+    if (strcmp(cmd, "run") == 0)
+        return ns_cmd_run(argc - 1, argv + 1);
+    if (strcmp(cmd, "bench") == 0) {
         fprintf(stderr, "needlesim: '%s' is not available in this version yet\n", cmd);
         return 2;
     }

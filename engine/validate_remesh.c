@@ -313,26 +313,6 @@ static double fit_circle(const double *p, int n, double *rms, double *off)
     return R;
 }
 
-/* Mean edge length of the mesh's tets (material space) [m]. */
-static double mean_edge(const NsMesh *m)
-{
-    double sum = 0.0;
-    long n = 0;
-    for (int e = 0; e < m->tet_slots; e++) {
-        if (!ns_mesh_tet_alive(m, e))
-            continue;
-        const int *tn = m->tet_node + 4 * e;
-        for (int a = 0; a < 4; a++)
-            for (int b = a + 1; b < 4; b++) {
-                const double *p = m->u + 3 * tn[a], *q = m->u + 3 * tn[b];
-                sum += sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
-                            (p[2] - q[2]) * (p[2] - q[2]));
-                n++;
-            }
-    }
-    return n ? sum / (double)n : 0.0;
-}
-
 /* The entry tracks of the brachytherapy cases: 2 cm from the perineum (z = 0) along +z, at
  * lateral offsets tried in turn until the mesh takes one without inverting a tet
  * (tests/bench_coupling.c uses the same). */
@@ -403,7 +383,7 @@ static int remesh_restore(NsValidateResult *r)
         return fail(r, "out of memory");
     }
     uint64_t h0 = ns_mesh_topology_hash(&orig);
-    double h = mean_edge(&orig);
+    double h = ns_mesh_mean_edge(&orig);
     int nodes[64], np = -1;
     for (int o = 0; o < 8 && np < 2; o++) {
         const double *of = entry_offsets[o];

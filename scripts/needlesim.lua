@@ -38,6 +38,7 @@ local SHAPE = make_kind("shape", function(t) return "ns.shape." .. tostring(t.ty
 local MATERIAL = make_kind("material", function(t) return fmt("ns.material '%s'", t.name) end)
 local TISSUE = make_kind("tissue", function(t) return "ns.tissue." .. tostring(t.type) end)
 local SCENARIO = make_kind("scenario", function(t) return fmt("ns.scenario '%s'", t.name) end)
+local NEEDLE = make_kind("needle", function(t) return fmt("ns.needle '%s'", t.kind) end)
 
 local function kind_of(v)
     if type(v) ~= "table" then
@@ -789,14 +790,94 @@ function ns.tissue.file(t)
     return new(TISSUE, tissue)
 end
 
+-- Needle -----------------------------------------------------------------------------------
+
+local NEEDLE_FIELDS = { "kind", "diameter", "inner_diameter", "youngs", "density", "tip",
+    "bevel_deg" }
+-- The two needles of the paper's brachytherapy runs (§4, Table 2: ProsSS and ProsFB): an 18 G
+-- stainless-steel needle with a symmetric tip, and a flexible nitinol needle with a bevel tip
+-- (the phantom experiments' 0.83 mm needle).
+local NEEDLE_KINDS = {
+    stiff = { diameter = 1.27e-3, inner_diameter = 0.84e-3, youngs = 200e9, density = 8000,
+        tip = "symmetric", bevel_deg = 30 },
+    flexible = { diameter = 0.83e-3, inner_diameter = 0, youngs = 50e9, density = 6450,
+        tip = "bevel", bevel_deg = 30 },
+}
+
+--- ns.needle{kind, diameter, inner_diameter, youngs, density, tip, bevel_deg}
+-- `kind` ("stiff" or "flexible", default "stiff") gives every field not given.
+function ns.needle(t)
+    local where = where_of(2)
+    local a = args(t, "ns.needle", where, NEEDLE_FIELDS)
+    local kind = a:choice("kind", { "stiff", "flexible" }, "stiff")
+    local d = NEEDLE_KINDS[kind]
+    local n = {
+        kind = kind,
+        diameter = a:number("diameter", GT0, "> 0 [m]", d.diameter),
+        inner_diameter = a:number("inner_diameter", GE0, ">= 0 [m]", d.inner_diameter),
+        youngs = a:number("youngs", GT0, "> 0 [Pa]", d.youngs),
+        density = a:number("density", GT0, "> 0 [kg/m^3]", d.density),
+        tip = a:choice("tip", { "bevel", "symmetric" }, d.tip),
+        bevel_deg = a:number("bevel_deg", function(x) return x > 0 and x < 90 end,
+            "in (0, 90) [degrees]", d.bevel_deg),
+        where = where,
+    }
+    if n.inner_diameter >= n.diameter then
+        a:fail("inner_diameter (%g m) must be smaller than diameter (%g m)", n.inner_diameter,
+            n.diameter)
+    end
+    return new(NEEDLE, n)
+end
+
 -- Scenario ---------------------------------------------------------------------------------
 
 local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "duration", "needle",
     "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
     "accuracy", "solver" }
 -- Accepted now and checked by the stages that use them (later versions).
-local RESERVED = { "needle", "entry", "targets", "obstacles", "markers", "seeds", "camera",
-    "accuracy", "solver" }
+local RESERVED = { "obstacles", "markers", "seeds", "camera", "accuracy", "solver" }
+
+local ENTRY_FIELDS = { "point", "direction" }
+local TARGET_FIELDS = { "name", "at", "tolerance" }
+
+-- entry = {point, direction}: where the needle's sleeve meets the skin and the way it points.
+local function entry_of(v, where)
+    if v == nil then
+        return nil
+    end
+    local a = args(v, "ns.scenario: entry", where, ENTRY_FIELDS)
+    local e = { point = a:vec3("point", ANY, " [m]"), direction = a:vec3("direction", ANY, "") }
+    local d = e.direction
+    local len = math.sqrt(d[1] * d[1] + d[2] * d[2] + d[3] * d[3])
+    if len == 0 then
+        a:fail("direction must not be zero")
+    end
+    e.direction = { d[1] / len, d[2] / len, d[3] / len }
+    return e
+end
+
+-- targets = {{name, at, tolerance}, ...}: points in the tissue the needle tip should reach.
+local function targets_of(v, where)
+    if v == nil then
+        return {}
+    end
+    if type(v) ~= "table" or kind_of(v) then
+        raise(where, "ns.scenario", fmt("targets must be a list of {name, at, tolerance} (got %s)",
+            describe(v)))
+    end
+    local out, names = {}, {}
+    for i, tv in ipairs(v) do
+        local a = args(tv, fmt("ns.scenario: targets[%d]", i), where, TARGET_FIELDS)
+        local tg = { name = a:string("name"), at = a:vec3("at", ANY, " [m]"),
+            tolerance = a:number("tolerance", GT0, "> 0 [m]") }
+        if names[tg.name] then
+            a:fail("name '%s' is used by targets[%d] already", tg.name, names[tg.name])
+        end
+        names[tg.name] = i
+        out[i] = tg
+    end
+    return out
+end
 
 --- ns.scenario{name, tissue, description, seed, dt, duration, script, on_tick, ...}
 function ns.scenario(t)
@@ -823,6 +904,13 @@ function ns.scenario(t)
             .. "(got %s)", describe(tissue))
     end
     sc.tissue = tissue
+    local needle = t.needle
+    if needle ~= nil and kind_of(needle) ~= "needle" then
+        a:fail("needle must be ns.needle{...} (got %s)", describe(needle))
+    end
+    sc.needle = needle
+    sc.entry = entry_of(t.entry, where)
+    sc.targets = targets_of(t.targets, where)
     for _, k in ipairs(RESERVED) do
         sc[k] = t[k]
     end

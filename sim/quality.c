@@ -136,3 +136,23 @@ void ns_mesh_quality(const NsMesh *m, bool use_world, NsQualityStats *out)
     }
     *out = s;
 }
+
+/* Mean edge length of the mesh's tets (material space) [m]. */
+double ns_mesh_mean_edge(const NsMesh *m)
+{
+    double sum = 0.0;
+    long n = 0;
+    for (int e = 0; e < m->tet_slots; e++) {
+        if (!ns_mesh_tet_alive(m, e))
+            continue;
+        const int *tn = m->tet_node + 4 * e;
+        for (int a = 0; a < 4; a++)
+            for (int b = a + 1; b < 4; b++) {
+                const double *p = m->u + 3 * tn[a], *q = m->u + 3 * tn[b];
+                sum += sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
+                            (p[2] - q[2]) * (p[2] - q[2]));
+                n++;
+            }
+    }
+    return n ? sum / (double)n : 0.0;
+}

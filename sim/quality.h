@@ -29,4 +29,7 @@ typedef struct NsQualityStats {
 /* Over all alive tets, in material coordinates (use_world = false) or world coordinates. */
 void ns_mesh_quality(const NsMesh *m, bool use_world, NsQualityStats *out);
 
+/* Mean edge length of the alive tets, counting each tet's six edges (material space) [m]. */
+double ns_mesh_mean_edge(const NsMesh *m);
+
 #endif

@@ -159,8 +159,8 @@ fi
 
 expect_error "no command: usage, exit 2" 2 "usage:" --
 expect_error "unknown command: exit 2" 2 "unknown command 'frobnicate'" -- frobnicate
-expect_error "run not built yet: exit 2" 2 "'run' is not available in this version yet" -- \
-    run scenarios/phantom.lua
+expect_error "run: a scenario without an entry, exit 1" 1 "phantom.lua:" \
+    "ns.scenario: missing field 'entry'" -- run scenarios/phantom.lua -o "$TMP/run_phantom"
 expect_error "bench not built yet: exit 2" 2 "'bench' is not available" -- bench x.lua
 expect_error "check: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
     check scenarios/phantom.lua --bogus
@@ -172,7 +172,7 @@ expect_error "check: --mesh-out with unknown extension, exit 2" 2 "use .vtu or .
 
 # ---- the shipped scenarios -----------------------------------------------------------------
 
-for sc in brachytherapy two_cylinders phantom; do
+for sc in brachytherapy two_cylinders phantom tutorial; do
     run check "scenarios/$sc.lua" --json
     if [ "$RC" != 0 ]; then
         fail "check $sc --json" "exit $RC"

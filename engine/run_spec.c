@@ -1,0 +1,143 @@
+/* Reading a scenario's run fields (run_spec.h). */
+#include "run_spec.h"
+
+#include <lauxlib.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "err.h"
+#include "mesh.h"
+#include "remesh.h"
+
+static double num_field(lua_State *L, int idx, const char *key, double dflt)
+{
+    double v = dflt;
+    if (lua_getfield(L, idx, key) == LUA_TNUMBER)
+        v = lua_tonumber(L, -1);
+    lua_pop(L, 1);
+    return v;
+}
+
+static void vec_field(lua_State *L, int idx, const char *key, double out[3])
+{
+    out[0] = out[1] = out[2] = 0.0;
+    if (lua_getfield(L, idx, key) == LUA_TTABLE)
+        for (int i = 0; i < 3; i++) {
+            lua_rawgeti(L, -1, i + 1);
+            out[i] = lua_tonumber(L, -1);
+            lua_pop(L, 1);
+        }
+    lua_pop(L, 1);
+}
+
+static char *str_field(lua_State *L, int idx, const char *key, const char *dflt)
+{
+    const char *s = dflt;
+    if (lua_getfield(L, idx, key) == LUA_TSTRING)
+        s = lua_tostring(L, -1);
+    size_t n = strlen(s);
+    char *out = malloc(n + 1);
+    if (out)
+        memcpy(out, s, n + 1);
+    lua_pop(L, 1);
+    return out;
+}
+
+void ns_run_spec_free(NsRunSpec *spec)
+{
+    free(spec->needle_kind);
+    for (int i = 0; i < spec->target_count; i++)
+        free(spec->targets[i].name);
+    free(spec->targets);
+    memset(spec, 0, sizeof *spec);
+}
+
+int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_sz)
+{
+    memset(spec, 0, sizeof *spec);
+    lua_State *L = ns_lua_state(sc->lua);
+    int top = lua_gettop(L);
+    lua_rawgeti(L, LUA_REGISTRYINDEX, sc->table_ref);
+    int si = lua_gettop(L);
+    int rc = 0;
+    /* The needle: the stiff 18 G default when none is given (scripts/needlesim.lua). */
+    if (lua_getfield(L, si, "needle") == LUA_TTABLE) {
+        int ni = lua_gettop(L);
+        spec->needle_kind = str_field(L, ni, "kind", "stiff");
+        spec->diameter = num_field(L, ni, "diameter", 0.0);
+        spec->inner_diameter = num_field(L, ni, "inner_diameter", 0.0);
+        spec->youngs = num_field(L, ni, "youngs", 0.0);
+        spec->density = num_field(L, ni, "density", 0.0);
+        char *tip = str_field(L, ni, "tip", "symmetric");
+        spec->bevel = tip && strcmp(tip, "bevel") == 0;
+        free(tip);
+        spec->bevel_deg = num_field(L, ni, "bevel_deg", 30.0);
+    } else {
+        spec->needle_kind = malloc(6);
+        if (spec->needle_kind)
+            memcpy(spec->needle_kind, "stiff", 6);
+        spec->diameter = 1.27e-3;
+        spec->inner_diameter = 0.84e-3;
+        spec->youngs = 200e9;
+        spec->density = 8000.0;
+        spec->bevel = false;
+        spec->bevel_deg = 30.0;
+    }
+    lua_pop(L, 1);
+    if (lua_getfield(L, si, "entry") == LUA_TTABLE) {
+        vec_field(L, lua_gettop(L), "point", spec->entry_point);
+        vec_field(L, lua_gettop(L), "direction", spec->entry_dir);
+    } else {
+        ns_set_err(err, err_sz,
+                   "%s: ns.scenario: missing field 'entry' ({point = {x, y, z}, direction = "
+                   "{x, y, z}}): `needlesim run` needs to know where the needle goes in",
+                   sc->where);
+        rc = -1;
+    }
+    lua_pop(L, 1);
+    spec->dt = num_field(L, si, "dt", 0.01);
+    spec->duration = num_field(L, si, "duration", 0.0);
+    lua_getfield(L, si, "script");
+    spec->has_script = lua_isfunction(L, -1);
+    lua_pop(L, 1);
+    lua_getfield(L, si, "on_tick");
+    spec->has_on_tick = lua_isfunction(L, -1);
+    lua_pop(L, 1);
+    if (rc == 0 && lua_getfield(L, si, "targets") == LUA_TTABLE) {
+        int ti = lua_gettop(L);
+        int n = (int)lua_rawlen(L, ti);
+        spec->targets = calloc(n > 0 ? (size_t)n : 1, sizeof *spec->targets);
+        if (!spec->targets) {
+            ns_set_err(err, err_sz, "out of memory");
+            rc = -1;
+        }
+        for (int i = 0; rc == 0 && i < n; i++) {
+            lua_rawgeti(L, ti, i + 1);
+            NsRunTarget *t = &spec->targets[i];
+            t->name = str_field(L, lua_gettop(L), "name", "?");
+            vec_field(L, lua_gettop(L), "at", t->at);
+            t->tolerance = num_field(L, lua_gettop(L), "tolerance", 0.0);
+            spec->target_count = i + 1;
+            lua_pop(L, 1);
+            if (ns_mesh_locate(&sc->mesh, t->at, -1, 1e-9, NULL) < 0) {
+                ns_set_err(err, err_sz,
+                           "%s: ns.scenario: targets[%d] '%s' at (%g, %g, %g) m is outside the "
+                           "tissue",
+                           sc->where, i + 1, t->name, t->at[0], t->at[1], t->at[2]);
+                rc = -1;
+            }
+        }
+    }
+    lua_settop(L, top);
+    if (rc == 0 && !spec->has_script && !spec->has_on_tick && spec->duration <= 0.0) {
+        ns_set_err(err, err_sz,
+                   "%s: ns.scenario: nothing to run: give a script, an on_tick or a duration",
+                   sc->where);
+        rc = -1;
+    }
+    if (rc)
+        ns_run_spec_free(spec);
+    return rc;
+}

@@ -1,0 +1,38 @@
+/* What `needlesim run` needs from a scenario beyond its tissue: the needle, the entry, the
+ * targets, the time step and duration, and whether it has a script or an on_tick. The Lua side
+ * (scripts/needlesim.lua: ns.needle, ns.scenario) has checked every field's type and range;
+ * this reads them into C and checks what needs the mesh (a target inside the tissue). */
+#ifndef NS_RUN_SPEC_H
+#define NS_RUN_SPEC_H
+
+#include <stdbool.h>
+
+#include "scenario.h"
+
+typedef struct NsRunTarget {
+    char *name;
+    double at[3];     /* material (= initial world) position [m] */
+    double tolerance; /* [m] */
+} NsRunTarget;
+
+typedef struct NsRunSpec {
+    /* ns.needle{} (the stiff default when the scenario has none) */
+    char *needle_kind;
+    double diameter, inner_diameter, youngs, density; /* SI */
+    bool bevel;
+    double bevel_deg;
+    /* entry = {point, direction} (direction of unit length) */
+    double entry_point[3], entry_dir[3];
+    NsRunTarget *targets;
+    int target_count;
+    double dt;       /* [s]: the scenario's, else 0.01 */
+    double duration; /* [s]: the scenario's, else 0 (until the script ends) */
+    bool has_script, has_on_tick;
+} NsRunSpec;
+
+/* Reads sc's run fields. Returns 0, or -1 with one line naming the scenario's file and line
+ * and the field; spec is then freed. */
+int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_sz);
+void ns_run_spec_free(NsRunSpec *spec);
+
+#endif

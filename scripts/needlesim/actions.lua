@@ -1,0 +1,157 @@
+-- needlesim.actions: the blocking-style actions a scenario's script is written with.
+--
+--   local act = require "needlesim.actions"
+--   script = function()
+--     act.insert{ speed = 0.01, depth = 0.03 }   -- 10 mm/s until 3 cm deep
+--     act.twist{ angle = math.pi }               -- turn the base half a turn
+--     act.wait{ time = 0.5 }
+--     act.retract{ speed = 0.02 }                -- all the way out
+--   end
+--
+-- The script runs in a coroutine. Each action sets the needle's controls (`sim.control`) and
+-- yields once per time step until it is done, so a script reads top to bottom like the
+-- procedure it describes. `sim` (also passed to `on_tick`) is read-only for scripts except
+-- `sim.control`; docs/scenarios.md lists its fields. A bad argument is an error naming the line
+-- of the script that called the action.
+local act = {}
+
+local sim -- the engine's view of the run, bound before the script starts (act._bind)
+local co -- the script's coroutine
+
+local fmt = string.format
+
+local function finite(x)
+    return type(x) == "number" and x == x and x ~= math.huge and x ~= -math.huge
+end
+
+local function fields(t, name, known)
+    if type(t) ~= "table" then
+        error(fmt("act.%s: expected a table of fields {%s} (got %s)", name,
+            table.concat(known, ", "), type(t)), 3)
+    end
+    local set = {}
+    for _, k in ipairs(known) do
+        set[k] = true
+    end
+    for k in pairs(t) do
+        if not set[k] then
+            error(fmt("act.%s: unknown field '%s' (known: %s)", name, tostring(k),
+                table.concat(known, ", ")), 3)
+        end
+    end
+end
+
+local function number(t, name, k, test, what, default)
+    local v = t[k]
+    if v == nil and default ~= nil then
+        return default
+    end
+    if v == nil then
+        error(fmt("act.%s: missing required field '%s' (a number %s)", name, k, what), 3)
+    end
+    if not finite(v) or not test(v) then
+        error(fmt("act.%s: %s must be a number %s (got %s)", name, k, what, tostring(v)), 3)
+    end
+    return v
+end
+
+local function GT0(x) return x > 0 end
+local function GE0(x) return x >= 0 end
+local function ANY() return true end
+
+local function running()
+    if sim == nil or coroutine.running() ~= co then
+        error("needlesim.actions: actions run only inside the scenario's script", 3)
+    end
+end
+
+local function tick()
+    coroutine.yield()
+end
+
+local function stop()
+    sim.control.v_insert = 0
+    sim.control.twist_rate = 0
+end
+
+--- act.insert{speed, depth}: push the needle in at `speed` [m/s] until its tip is `depth` [m]
+-- past the entry point (measured along the entry direction).
+function act.insert(t)
+    running()
+    fields(t, "insert", { "speed", "depth" })
+    local speed = number(t, "insert", "speed", GT0, "> 0 [m/s]")
+    local depth = number(t, "insert", "depth", GT0, "> 0 [m]")
+    while sim.depth < depth do
+        sim.control.v_insert = speed
+        tick()
+    end
+    stop()
+end
+
+--- act.retract{speed, depth}: pull the needle back at `speed` [m/s] until its tip is `depth`
+-- [m] past the entry point (default 0: out of the tissue).
+function act.retract(t)
+    running()
+    fields(t, "retract", { "speed", "depth" })
+    local speed = number(t, "retract", "speed", GT0, "> 0 [m/s]")
+    local depth = number(t, "retract", "depth", GE0, ">= 0 [m]", 0)
+    while sim.depth > depth and not sim.exited do
+        sim.control.v_insert = -speed
+        tick()
+    end
+    stop()
+end
+
+--- act.twist{angle, rate}: turn the needle's base by `angle` [rad] (signed) at `rate` [rad/s]
+-- (default pi), the insertion paused.
+function act.twist(t)
+    running()
+    fields(t, "twist", { "angle", "rate" })
+    local angle = number(t, "twist", "angle", ANY, "[rad]")
+    local rate = number(t, "twist", "rate", GT0, "> 0 [rad/s]", math.pi)
+    local turned, sign = 0, angle < 0 and -1 or 1
+    while turned < math.abs(angle) - 1e-12 do
+        local w = math.min(rate, (math.abs(angle) - turned) / sim.dt)
+        sim.control.v_insert = 0
+        sim.control.twist_rate = sign * w
+        turned = turned + w * sim.dt
+        tick()
+    end
+    stop()
+end
+
+--- act.wait{time}: hold the needle still for `time` [s].
+function act.wait(t)
+    running()
+    fields(t, "wait", { "time" })
+    local time = number(t, "wait", "time", GE0, ">= 0 [s]")
+    local n = math.floor(time / sim.dt + 0.5)
+    stop()
+    for _ = 1, n do
+        tick()
+    end
+end
+
+-- For the engine: bind the run's `sim` table and the script; then call act._tick() once per
+-- time step before the solver steps. Returns true while the script has more to do.
+function act._bind(s, script)
+    sim = s
+    co = script and coroutine.create(script) or nil
+end
+
+function act._tick()
+    if co == nil or coroutine.status(co) == "dead" then
+        return false
+    end
+    local ok, err = coroutine.resume(co)
+    if not ok then
+        error(err, 0)
+    end
+    if coroutine.status(co) == "dead" then
+        stop()
+        return false
+    end
+    return true
+end
+
+return act

@@ -1,0 +1,122 @@
+#!/bin/bash
+# `needlesim run` end to end (docs/scenarios.md): the tutorial scenario runs and writes a report
+# whose contract keys are all present and finite and whose target is hit; the state hash is the
+# same with 1 and 2 threads; bad input (a script error, a target outside the tissue, a negative
+# speed, an unwritable output folder) exits 1 naming the file and line or field and leaves no
+# report.json; usage errors exit 2.
+#
+# usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR
+set -u
+
+BIN=${1:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR}
+SRC=${2:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR}
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-run.XXXXXX") || exit 1
+trap 'rm -rf "$TMP"' EXIT
+PASSED=0
+FAILED=0
+pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
+fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
+
+TUT="$SRC/scenarios/tutorial.lua"
+
+# The tutorial, one thread, then two.
+"$BIN" run "$TUT" -o "$TMP/t1" --threads 1 >"$TMP/out1" 2>"$TMP/err1"
+rc=$?
+cat "$TMP/out1"
+if [ $rc = 0 ] && [ -f "$TMP/t1/report.json" ] && [ -f "$TMP/t1/trajectory.csv" ]; then
+    pass "tutorial runs and writes report.json and trajectory.csv"
+else
+    fail "tutorial runs" "exit $rc: $(tail -2 "$TMP/err1")"
+fi
+if ls -A "$TMP/t1" | grep -q '\.part$'; then fail "no temporary files left" "$(ls -A "$TMP/t1")"; else pass "no temporary files left"; fi
+
+# The report: every contract key present, every number finite, the target hit.
+python3 - "$TMP/t1/report.json" "$TMP/t1/trajectory.csv" <<'PY' >"$TMP/py" 2>&1
+import json, math, sys
+r = json.load(open(sys.argv[1]))
+need = {
+    "": ["schema", "scenario", "version", "steps", "sim_time_s", "wall_time_s", "step_ms",
+         "stages_ms", "lcp_trials", "cg_iterations", "friction_consistent_fraction", "mesh",
+         "needle", "targets", "seeds", "obstacles", "score", "warnings", "state_hash"],
+    "step_ms": ["median", "p95", "max"],
+    "stages_ms": ["total", "lcp", "tissue", "needle", "remesh"],
+    "lcp_trials": ["min", "mean", "max"], "cg_iterations": ["min", "mean", "max"],
+    "mesh": ["tets", "nodes", "min_dihedral_deg", "max_dihedral_deg"],
+    "needle": ["tip_m", "depth_m", "max_axial_force_n"],
+    "score": ["total"], "warnings": ["nan", "inverted", "unconverged", "lcp_unresolved"],
+}
+for sub, keys in need.items():
+    obj = r[sub] if sub else r
+    for k in keys:
+        assert k in obj, "missing key %s%s" % (sub + "." if sub else "", k)
+def finite(v, path):
+    if isinstance(v, bool) or isinstance(v, str):
+        return
+    if v is None:
+        raise AssertionError("null (non-finite) at " + path)
+    if isinstance(v, (int, float)):
+        assert math.isfinite(v), "non-finite at " + path
+    elif isinstance(v, list):
+        for i, x in enumerate(v):
+            finite(x, "%s[%d]" % (path, i))
+    elif isinstance(v, dict):
+        for k, x in v.items():
+            finite(x, path + "." + k)
+finite(r, "report")
+assert r["steps"] > 0
+assert len(r["targets"]) == 1 and r["targets"][0]["hit"] is True, r["targets"]
+for k in ["name", "error_mm", "tolerance_mm", "hit"]:
+    assert k in r["targets"][0], "targets[0]." + k
+assert r["warnings"]["nan"] == 0 and r["warnings"]["inverted"] == 0
+rows = open(sys.argv[2]).read().splitlines()
+assert rows[0].startswith("t_s,tip_x_m"), rows[0]
+assert len(rows) == r["steps"] + 1, (len(rows), r["steps"])
+print("steps %d, target error %.2f mm, score %.1f" % (r["steps"], r["targets"][0]["error_mm"], r["score"]["total"]))
+PY
+if [ $? = 0 ]; then pass "report keys present and finite, target hit ($(cat "$TMP/py"))"; else fail "report" "$(tail -1 "$TMP/py")"; fi
+
+"$BIN" run "$TUT" -o "$TMP/t2" --threads 2 --quiet >"$TMP/out2" 2>"$TMP/err2"
+h1=$(grep '"state_hash"' "$TMP/t1/report.json")
+h2=$(grep '"state_hash"' "$TMP/t2/report.json" 2>/dev/null)
+if [ -n "$h1" ] && [ "$h1" = "$h2" ]; then pass "same state hash with 1 and 2 threads"; else fail "state hash, 1 vs 2 threads" "$h1 / $h2"; fi
+
+# Bad input: exit 1, one line naming the file and line or field, no report.json.
+bad() { # name, sed expression on the tutorial, expected message (grep -E)
+    sed "$2" "$TUT" >"$TMP/$1.lua"
+    "$BIN" run "$TMP/$1.lua" -o "$TMP/o_$1" --quiet >"$TMP/out_$1" 2>"$TMP/err_$1"
+    local rc=$?
+    if [ $rc = 1 ] && grep -Eq "$3" "$TMP/err_$1" && [ ! -e "$TMP/o_$1/report.json" ] &&
+        [ ! -e "$TMP/o_$1/trajectory.csv" ]; then
+        pass "$1: exit 1, $(head -1 "$TMP/err_$1" | sed "s|$TMP/||")"
+    else
+        fail "$1" "exit $rc: $(head -2 "$TMP/err_$1")"
+    fi
+}
+bad script_error 's/act.wait { time = 0.2 }/act.wait { time = 0.2 }; no_such_action()/' \
+    "script_error.lua:[0-9]+: attempt to call a nil value \(global 'no_such_action'\)"
+bad target_outside 's/at = { 0, 0, 0.03 }/at = { 0, 0, 0.3 }/' \
+    "target_outside.lua:[0-9]+: ns.scenario: targets\[1\] 'target' .* outside the tissue"
+bad negative_speed 's/speed = 0.02, depth/speed = -0.02, depth/' \
+    "negative_speed.lua:[0-9]+: act.insert: speed must be a number > 0"
+bad no_entry 's/^    entry = .*$//' "no_entry.lua:[0-9]+: ns.scenario: missing field 'entry'"
+bad bad_tolerance 's/tolerance = 2e-3/tolerance = -1/' \
+    "bad_tolerance.lua:[0-9]+: ns.scenario: targets\[1\]: tolerance must be a number > 0"
+touch "$TMP/a_file"
+"$BIN" run "$TUT" -o "$TMP/a_file/out" --quiet >/dev/null 2>"$TMP/err_dir"
+rc=$?
+if [ $rc = 1 ] && grep -q "cannot create output folder" "$TMP/err_dir"; then
+    pass "unwritable output folder: exit 1"
+else
+    fail "unwritable output folder" "exit $rc: $(head -1 "$TMP/err_dir")"
+fi
+
+# Usage errors: exit 2.
+"$BIN" run "$TUT" --bogus >/dev/null 2>"$TMP/err_u"
+rc=$?
+if [ $rc = 2 ] && grep -q "unknown option '--bogus'" "$TMP/err_u"; then pass "unknown option: exit 2"; else fail "unknown option" "exit $rc"; fi
+"$BIN" run "$TUT" --steps 0 >/dev/null 2>"$TMP/err_s"
+rc=$?
+if [ $rc = 2 ]; then pass "--steps 0: exit 2"; else fail "--steps 0" "exit $rc"; fi
+
+echo "$PASSED passed, $FAILED failed"
+[ "$FAILED" = 0 ]
