@@ -127,15 +127,32 @@ typedef struct Run {
     NsRod rod;
     NsCoupled c;
     bool have_sc, have_spec, have_tissue, have_rod, have_c;
-    int sim_ref, act_ref; /* registry refs: the `sim` table, the actions module */
+    int sim_ref, act_ref,
+        co_ref; /* registry refs: `sim`, the actions module, the script's coroutine */
     /* statistics */
     Series step_ms, total_ms, lcp_ms, tissue_ms, needle_ms, remesh_ms, trials, iterations;
     long steps;
     int consistent, nan, inverted, unconverged, lcp_unresolved;
     double max_axial, last_axial, path_cut, wall_s, last_tip[3];
-    int *target_hint;
+    int *target_hint, *marker_hint;
+    /* seeds released so far: material point, time, target index (-1: nearest at the end) */
+    struct Seed {
+        double u[3], t;
+        int target, hint;
+    } * seeds;
+    int seed_n, seed_cap;
+    /* obstacles: per obstacle, whether the needle entered it, when first, for how many steps,
+     * where the tip was when it went in, and the deepest it got from there */
+    struct Obstacle {
+        bool violated, inside;
+        double first_t, entry[3], max_depth;
+        int steps_inside;
+    } * obst;
+    int tip_hint, insertions;
+    double prev_v;
     /* output */
-    char *dir, *traj_tmp, *report_tmp;
+    char *traj_tmp, *report_tmp;
+    bool made_dir, progress_shown, script_finished;
     FILE *traj;
 } Run;
 
@@ -288,7 +305,12 @@ static int build(Run *r, char *err, int err_sz)
         }
     ns_mesh_free(&orig);
     r->target_hint = malloc((size_t)(sp->target_count + 1) * sizeof *r->target_hint);
-    if (!r->target_hint) {
+    r->marker_hint = malloc((size_t)(sp->marker_count + 1) * sizeof *r->marker_hint);
+    r->obst = calloc((size_t)sp->obstacle_count + 1, sizeof *r->obst);
+    r->tip_hint = -1;
+    for (int i = 0; r->marker_hint && i < sp->marker_count; i++)
+        r->marker_hint[i] = -1;
+    if (!r->target_hint || !r->marker_hint || !r->obst) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
@@ -325,98 +347,185 @@ static int get_raw(lua_State *L, int idx, const char *key)
     return lua_rawget(L, idx);
 }
 
-static int script_start(Run *r, char *err, int err_sz)
+/* Everything that touches the scenario's Lua state runs inside ns_lua_call (a protected call
+ * with the instruction budget): a script can replace globals, put metatables on the tables it
+ * sees or run out of memory, and none of that may raise outside a protected call. */
+
+typedef struct TickIO {
+    Run *r;
+    double t;
+    int exited;
+    int more, drop; /* out */
+} TickIO;
+
+/* (io) -> (): makes `sim`, loads needlesim.actions through the runtime's own require (kept in
+ * the registry by the runtime, not the script's global), and starts the script's coroutine. */
+static int start_body(lua_State *L)
 {
-    NsLua *rt = r->sc.lua;
-    lua_State *L = ns_lua_state(rt);
+    TickIO *io = lua_touserdata(L, 1);
+    Run *r = io->r;
     lua_newtable(L); /* sim */
     lua_pushstring(L, "control");
     lua_newtable(L);
     set_num(L, lua_gettop(L), "v_insert", 0.0);
     set_num(L, lua_gettop(L), "twist_rate", 0.0);
     lua_rawset(L, -3);
+    lua_pushvalue(L, -1);
     r->sim_ref = luaL_ref(L, LUA_REGISTRYINDEX);
-    lua_getglobal(L, "require");
+    int sim = lua_gettop(L);
+    lua_getfield(L, LUA_REGISTRYINDEX, "ns.require"); /* the sandbox's require */
+    if (!lua_isfunction(L, -1))
+        return luaL_error(L, "needlesim: the sandbox's require is missing");
     lua_pushstring(L, "needlesim.actions");
-    if (ns_lua_call(rt, 1, 1, err, err_sz))
-        return -1;
+    lua_call(L, 1, 1);
+    if (!lua_istable(L, -1))
+        return luaL_error(L, "needlesim: needlesim.actions did not load as a table");
+    lua_pushvalue(L, -1);
     r->act_ref = luaL_ref(L, LUA_REGISTRYINDEX);
-    lua_rawgeti(L, LUA_REGISTRYINDEX, r->act_ref);
-    lua_getfield(L, -1, "_bind");
-    lua_remove(L, -2);
-    lua_rawgeti(L, LUA_REGISTRYINDEX, r->sim_ref);
+    lua_pushstring(L, "_bind");
+    lua_rawget(L, -2);
+    lua_pushvalue(L, sim);
     lua_rawgeti(L, LUA_REGISTRYINDEX, r->sc.table_ref);
-    lua_getfield(L, -1, "script");
+    lua_pushstring(L, "script");
+    lua_rawget(L, -2);
     lua_remove(L, -2);
-    return ns_lua_call(rt, 2, 0, err, err_sz);
+    lua_call(L, 2, 1); /* returns the script's coroutine, or nil */
+    r->co_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    return 0;
 }
 
-/* Updates `sim` with the state, runs the script's next slice and on_tick, and reads the
- * controls. *more: the script has more to do. */
-static int script_tick(Run *r, double t, int exited, int *more, char *err, int err_sz)
+static int script_start(Run *r, char *err, int err_sz)
 {
-    NsLua *rt = r->sc.lua;
-    lua_State *L = ns_lua_state(rt);
-    int top = lua_gettop(L);
+    lua_State *L = ns_lua_state(r->sc.lua);
+    TickIO io = {.r = r};
+    lua_pushcfunction(L, start_body);
+    lua_pushlightuserdata(L, &io);
+    return ns_lua_call(r->sc.lua, 1, 0, err, err_sz);
+}
+
+/* The script's error, with the script's file and line in front when the error value has none
+ * (error({}) or error("x", 0)): the deepest frame of the coroutine in a Lua file. */
+static void raise_script_error(lua_State *L, lua_State *co, const char *scenario)
+{
+    const char *msg = lua_tostring(co, -1);
+    char buf[900];
+    snprintf(buf, sizeof buf, "%s",
+             msg                            ? msg
+             : lua_type(co, -1) == LUA_TNIL ? "error (nil)"
+                                            : "error (not a string)");
+    if (msg == NULL || strncmp(msg, scenario, strlen(scenario)) != 0) {
+        lua_Debug ar;
+        for (int level = 0; lua_getstack(co, level, &ar); level++)
+            if (lua_getinfo(co, "Sl", &ar) && ar.currentline > 0 && ar.source[0] == '@') {
+                if (strncmp(buf, ar.source + 1, strlen(ar.source + 1)) != 0) {
+                    lua_pushfstring(L, "%s:%d: %s", ar.source + 1, ar.currentline, buf);
+                    lua_error(L);
+                }
+                break;
+            }
+    }
+    lua_pushstring(L, buf);
+    lua_error(L);
+}
+
+/* (io) -> (): updates `sim`, resumes the script for one step, calls on_tick, reads the
+ * controls (raw accesses only: metatables a script sets do not run here). */
+static int tick_body(lua_State *L)
+{
+    TickIO *io = lua_touserdata(L, 1);
+    Run *r = io->r;
     lua_rawgeti(L, LUA_REGISTRYINDEX, r->sim_ref);
     int si = lua_gettop(L);
-    set_num(L, si, "t", t);
+    set_num(L, si, "t", io->t);
     set_num(L, si, "dt", r->spec.dt);
-    set_num(L, si, "step", (double)r->steps);
+    lua_pushstring(L, "step");
+    lua_pushinteger(L, r->steps);
+    lua_rawset(L, si);
     set_num(L, si, "depth", depth_of(r));
     set_vec(L, si, "tip", tip_of(r));
     set_num(L, si, "axial_force", r->last_axial);
+    lua_pushstring(L, "seeds_dropped");
+    lua_pushinteger(L, r->seed_n);
+    lua_rawset(L, si);
     lua_pushstring(L, "exited");
-    lua_pushboolean(L, exited);
+    lua_pushboolean(L, io->exited);
     lua_rawset(L, si);
     lua_pushstring(L, "targets"); /* a fresh table every step */
     lua_newtable(L);
     for (int i = 0; i < r->spec.target_count; i++) {
         double x[3];
-        if (world_of(&r->tissue.mesh, r->spec.targets[i].at, &r->target_hint[i], x) == 0)
-            set_vec(L, lua_gettop(L), r->spec.targets[i].name, x);
+        if (world_of(&r->tissue.mesh, r->spec.targets[i].at, &r->target_hint[i], x) != 0)
+            return luaL_error(L, "needlesim: target '%s' could not be located in the tissue",
+                              r->spec.targets[i].name);
+        set_vec(L, lua_gettop(L), r->spec.targets[i].name, x);
     }
     lua_rawset(L, si);
-    *more = 0;
-    lua_rawgeti(L, LUA_REGISTRYINDEX, r->act_ref);
-    lua_getfield(L, -1, "_tick");
-    lua_remove(L, -2);
-    if (ns_lua_call(rt, 0, 1, err, err_sz)) {
-        lua_settop(L, top);
-        return -1;
+    /* The script: one slice of its coroutine. */
+    io->more = 0;
+    lua_rawgeti(L, LUA_REGISTRYINDEX, r->co_ref);
+    lua_State *co = lua_tothread(L, -1);
+    int resumable = co && (lua_status(co) == LUA_YIELD ||
+                           (lua_status(co) == LUA_OK && lua_gettop(co) > 0)); /* not yet ended */
+    if (resumable) {
+        int nres = 0;
+        int st = lua_resume(co, L, 0, &nres);
+        if (st == LUA_YIELD) {
+            lua_pop(co, nres);
+            io->more = 1;
+        } else if (st == LUA_OK) {
+            lua_pop(co, nres);
+        } else {
+            raise_script_error(L, co, r->sc.path);
+        }
     }
-    *more = lua_toboolean(L, -1);
     lua_pop(L, 1);
+    lua_pushstring(L, "control");
+    if (lua_rawget(L, si) != LUA_TTABLE)
+        return luaL_error(L, "%s: sim.control must stay a table", r->sc.path);
+    int ci = lua_gettop(L);
+    if (!io->more && r->spec.has_script) { /* the script ended: the needle stops */
+        set_num(L, ci, "v_insert", 0.0);
+        set_num(L, ci, "twist_rate", 0.0);
+    }
     if (r->spec.has_on_tick) {
         lua_rawgeti(L, LUA_REGISTRYINDEX, r->sc.table_ref);
-        lua_getfield(L, -1, "on_tick");
+        lua_pushstring(L, "on_tick");
+        lua_rawget(L, -2);
         lua_remove(L, -2);
         lua_pushvalue(L, si);
-        if (ns_lua_call(rt, 1, 0, err, err_sz)) {
-            lua_settop(L, top);
-            return -1;
-        }
+        lua_call(L, 1, 0);
     }
-    int rc = 0;
-    if (get_raw(L, si, "control") != LUA_TTABLE) {
-        ns_set_err(err, err_sz, "%s: sim.control must stay a table", r->sc.path);
-        rc = -1;
-    } else {
-        static const char *const keys[2] = {"v_insert", "twist_rate"};
-        double *dst[2] = {&r->rod.v_insert, &r->rod.twist_rate};
-        for (int k = 0; k < 2 && rc == 0; k++) {
-            int ty = get_raw(L, lua_gettop(L), keys[k]);
-            double v = lua_tonumber(L, -1);
-            if (ty != LUA_TNUMBER || !isfinite(v)) {
-                ns_set_err(err, err_sz, "%s: sim.control.%s must be a finite number (got %s)",
-                           r->sc.path, keys[k], luaL_typename(L, -1));
-                rc = -1;
-            }
-            *dst[k] = v;
-            lua_pop(L, 1);
-        }
+    static const char *const keys[2] = {"v_insert", "twist_rate"};
+    double *dst[2] = {&r->rod.v_insert, &r->rod.twist_rate};
+    for (int k = 0; k < 2; k++) {
+        int ty = get_raw(L, ci, keys[k]);
+        double v = lua_tonumber(L, -1);
+        if (ty != LUA_TNUMBER || !isfinite(v))
+            return luaL_error(L, "%s: sim.control.%s must be a finite number (got %s)", r->sc.path,
+                              keys[k],
+                              ty == LUA_TNUMBER ? "a non-finite number" : luaL_typename(L, -1));
+        *dst[k] = v;
+        lua_pop(L, 1);
     }
-    lua_settop(L, top);
+    /* act.drop_seed{} raises a one-shot flag */
+    io->drop = get_raw(L, ci, "drop_seed") != LUA_TNIL && lua_toboolean(L, -1);
+    lua_pop(L, 1);
+    lua_pushstring(L, "drop_seed");
+    lua_pushnil(L);
+    lua_rawset(L, ci);
+    return 0;
+}
+
+/* One step of the script side. *more: the script has more to do; *drop: it asked for a seed. */
+static int script_tick(Run *r, double t, int exited, int *more, int *drop, char *err, int err_sz)
+{
+    lua_State *L = ns_lua_state(r->sc.lua);
+    TickIO io = {.r = r, .t = t, .exited = exited};
+    lua_pushcfunction(L, tick_body);
+    lua_pushlightuserdata(L, &io);
+    int rc = ns_lua_call(r->sc.lua, 1, 0, err, err_sz);
+    *more = io.more;
+    *drop = io.drop;
     return rc;
 }
 
@@ -431,28 +540,74 @@ static char *path_join(const char *dir, const char *name)
     return p;
 }
 
-static int open_outputs(Run *r, char *err, int err_sz)
+/* Creates DIR (and its parents) when missing, removes the report and trajectory of an earlier
+ * run there (this run replaces them; a failed one leaves neither), and opens the trajectory's
+ * temporary file, which also proves DIR writable before anything runs. */
+static int prepare_outputs(Run *r, char *err, int err_sz)
 {
-    if (mkdir(r->opt.out_dir, 0777) != 0 && errno != EEXIST) {
-        ns_set_err(err, err_sz, "cannot create output folder '%s': %s", r->opt.out_dir,
-                   strerror(errno));
-        return -1;
-    }
-    r->traj_tmp = path_join(r->opt.out_dir, ".trajectory.csv.part");
-    r->report_tmp = path_join(r->opt.out_dir, ".report.json.part");
-    if (!r->traj_tmp || !r->report_tmp) {
+    size_t n = strlen(r->opt.out_dir);
+    char *path = malloc(n + 1);
+    if (!path) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
+    memcpy(path, r->opt.out_dir, n + 1);
+    for (size_t i = 1; i <= n; i++) { /* mkdir -p */
+        if (path[i] != '/' && path[i] != '\0')
+            continue;
+        char c = path[i];
+        path[i] = '\0';
+        struct stat sb;
+        if (stat(path, &sb) != 0) {
+            if (mkdir(path, 0777) != 0) {
+                ns_set_err(err, err_sz, "cannot create output folder '%s': %s", path,
+                           strerror(errno));
+                free(path);
+                return -1;
+            }
+            if (c == '\0')
+                r->made_dir = true;
+        } else if (!S_ISDIR(sb.st_mode)) {
+            ns_set_err(err, err_sz, "cannot create output folder '%s': '%s' is not a folder",
+                       r->opt.out_dir, path);
+            free(path);
+            return -1;
+        }
+        path[i] = c;
+    }
+    free(path);
+    r->traj_tmp = path_join(r->opt.out_dir, ".trajectory.csv.part");
+    r->report_tmp = path_join(r->opt.out_dir, ".report.json.part");
+    char *old_t = path_join(r->opt.out_dir, "trajectory.csv");
+    char *old_r = path_join(r->opt.out_dir, "report.json");
+    if (!r->traj_tmp || !r->report_tmp || !old_t || !old_r) {
+        free(old_t);
+        free(old_r);
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    remove(old_t);
+    remove(old_r);
+    free(old_t);
+    free(old_r);
     r->traj = fopen(r->traj_tmp, "w");
     if (!r->traj) {
         ns_set_err(err, err_sz, "cannot write to output folder '%s': %s", r->opt.out_dir,
                    strerror(errno));
         return -1;
     }
-    fprintf(r->traj, "t_s,tip_x_m,tip_y_m,tip_z_m,depth_m,axial_force_n,v_insert_m_s,"
-                     "twist_rate_rad_s,n_static,n_dyn_pos,n_dyn_neg,cutting\n");
     return 0;
+}
+
+static void write_traj_header(Run *r)
+{
+    fprintf(r->traj, "t_s,tip_x_m,tip_y_m,tip_z_m,depth_m,axial_force_n,v_insert_m_s,"
+                     "twist_rate_rad_s,n_static,n_dyn_pos,n_dyn_neg,cutting");
+    for (int i = 0; i < r->spec.marker_count; i++) {
+        const char *n = r->spec.markers[i].name;
+        fprintf(r->traj, ",%s_x_m,%s_y_m,%s_z_m", n, n, n);
+    }
+    fputc('\n', r->traj);
 }
 
 static void remove_outputs(Run *r)
@@ -464,6 +619,8 @@ static void remove_outputs(Run *r)
         remove(r->traj_tmp);
     if (r->report_tmp)
         remove(r->report_tmp);
+    if (r->made_dir)
+        rmdir(r->opt.out_dir); /* only if empty: it is ours */
 }
 
 static void stats_object(NsJson *j, const char *key, const Series *s)
@@ -482,23 +639,122 @@ static void stats_object(NsJson *j, const char *key, const Series *s)
 }
 
 typedef struct TargetResult {
-    double x[3], error_mm;
-    bool hit, located;
+    double x[3], error_mm, score;
+    bool hit, by_seed;
 } TargetResult;
 
-/* The provisional score (docs/scenarios.md): per target 100 within its tolerance, falling
- * linearly to 0 at five tolerances; the total is their mean (100 without targets). */
-static double target_score(const TargetResult *t, double tol_mm)
+typedef struct SeedResult {
+    double x[3], error_mm;
+    int target;
+} SeedResult;
+
+typedef struct Results {
+    TargetResult *targets;
+    SeedResult *seeds;
+    double (*markers)[3];
+    double target_part, obstacle_penalty, total;
+    int violated;
+} Results;
+
+/* The score (docs/scenarios.md, formula needlesim-score/1). Each target scores 100 when its
+ * error is within its tolerance, falling linearly to 0 at five tolerances; its error is the
+ * distance to the nearest seed released for it when there is one, else to the needle tip at
+ * the end. The total is the mean over the targets (100 without targets) less 25 for each
+ * obstacle the needle entered, kept within [0, 100]. */
+static double target_score(double error_mm, double tol_mm)
 {
-    if (!t->located)
+    if (!isfinite(error_mm))
         return 0.0;
-    if (t->error_mm <= tol_mm)
+    if (error_mm <= tol_mm)
         return 100.0;
-    return fmax(0.0, 100.0 * (1.0 - (t->error_mm - tol_mm) / (4.0 * tol_mm)));
+    return fmax(0.0, 100.0 * (1.0 - (error_mm - tol_mm) / (4.0 * tol_mm)));
 }
 
-static int write_report(Run *r, const TargetResult *tr, double score, uint64_t hash, char *err,
-                        int err_sz)
+static double dist_mm(const double *a, const double *b)
+{
+    double d[3] = {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+    return 1e3 * sqrt(dot3(d, d));
+}
+
+static int score_run(Run *r, Results *res)
+{
+    const NsRunSpec *sp = &r->spec;
+    const NsMesh *M = &r->tissue.mesh;
+    memset(res, 0, sizeof *res);
+    res->targets = calloc((size_t)sp->target_count + 1, sizeof *res->targets);
+    res->seeds = calloc((size_t)r->seed_n + 1, sizeof *res->seeds);
+    res->markers = calloc((size_t)sp->marker_count + 1, sizeof *res->markers);
+    if (!res->targets || !res->seeds || !res->markers)
+        return -1;
+    for (int i = 0; i < sp->target_count; i++) {
+        TargetResult *t = &res->targets[i];
+        t->error_mm = NAN;
+        if (world_of(M, sp->targets[i].at, &r->target_hint[i], t->x) != 0)
+            t->x[0] = t->x[1] = t->x[2] = NAN;
+    }
+    for (int k = 0; k < r->seed_n; k++) {
+        SeedResult *sd = &res->seeds[k];
+        if (world_of(M, r->seeds[k].u, &r->seeds[k].hint, sd->x) != 0)
+            sd->x[0] = sd->x[1] = sd->x[2] = NAN;
+        sd->target = r->seeds[k].target;
+        if (sd->target < 0) { /* beyond the plan: the nearest target */
+            double best = INFINITY;
+            for (int i = 0; i < sp->target_count; i++) {
+                double d = dist_mm(sd->x, res->targets[i].x);
+                if (d < best) {
+                    best = d;
+                    sd->target = i;
+                }
+            }
+        }
+        sd->error_mm = sd->target >= 0 ? dist_mm(sd->x, res->targets[sd->target].x) : NAN;
+        TargetResult *t = &res->targets[sd->target >= 0 ? sd->target : 0];
+        if (sd->target >= 0 && (!t->by_seed || sd->error_mm < t->error_mm)) {
+            t->error_mm = sd->error_mm;
+            t->by_seed = true;
+        }
+    }
+    res->target_part = 100.0;
+    for (int i = 0; i < sp->target_count; i++) {
+        TargetResult *t = &res->targets[i];
+        if (!t->by_seed)
+            t->error_mm = dist_mm(tip_of(r), t->x);
+        double tol = 1e3 * sp->targets[i].tolerance;
+        t->hit = isfinite(t->error_mm) && t->error_mm <= tol;
+        t->score = target_score(t->error_mm, tol);
+        res->target_part = i ? res->target_part + t->score : t->score;
+    }
+    if (sp->target_count)
+        res->target_part /= sp->target_count;
+    for (int k = 0; k < sp->obstacle_count; k++)
+        res->violated += r->obst[k].violated;
+    res->obstacle_penalty = 25.0 * res->violated;
+    res->total = fmin(100.0, fmax(0.0, res->target_part - res->obstacle_penalty));
+    for (int i = 0; i < sp->marker_count; i++) {
+        int h = -1;
+        if (world_of(M, sp->markers[i].at, &h, res->markers[i]) != 0)
+            res->markers[i][0] = res->markers[i][1] = res->markers[i][2] = NAN;
+    }
+    return 0;
+}
+
+static void results_free(Results *res)
+{
+    free(res->targets);
+    free(res->seeds);
+    free(res->markers);
+}
+
+static void json_vec(NsJson *j, const char *key, const double *v)
+{
+    ns_json_key(j, key);
+    ns_json_begin_array(j);
+    for (int k = 0; k < 3; k++)
+        ns_json_number(j, v[k]);
+    ns_json_end_array(j);
+}
+
+static int write_report(Run *r, const Results *res, uint64_t hash, char *err, int err_sz)
 {
     FILE *f = fopen(r->report_tmp, "w");
     if (!f) {
@@ -522,6 +778,8 @@ static int write_report(Run *r, const TargetResult *tr, double score, uint64_t h
     ns_json_int(&j, r->opt.threads);
     ns_json_key(&j, "steps");
     ns_json_int(&j, r->steps);
+    ns_json_key(&j, "script_finished");
+    ns_json_bool(&j, r->script_finished);
     ns_json_key(&j, "dt_s");
     ns_json_number(&j, r->spec.dt);
     ns_json_key(&j, "sim_time_s");
@@ -584,35 +842,91 @@ static int write_report(Run *r, const TargetResult *tr, double score, uint64_t h
     ns_json_begin_array(&j);
     for (int i = 0; i < r->spec.target_count; i++) {
         const NsRunTarget *t = &r->spec.targets[i];
+        const TargetResult *tr = &res->targets[i];
         ns_json_begin_object(&j);
         ns_json_key(&j, "name");
         ns_json_string(&j, t->name);
         ns_json_key(&j, "error_mm");
-        ns_json_number(&j, tr[i].error_mm);
+        ns_json_number(&j, tr->error_mm);
         ns_json_key(&j, "tolerance_mm");
         ns_json_number(&j, 1e3 * t->tolerance);
         ns_json_key(&j, "hit");
-        ns_json_bool(&j, tr[i].hit);
-        ns_json_key(&j, "position_m");
-        ns_json_begin_array(&j);
-        for (int k = 0; k < 3; k++)
-            ns_json_number(&j, tr[i].x[k]);
-        ns_json_end_array(&j);
+        ns_json_bool(&j, tr->hit);
+        ns_json_key(&j, "by");
+        ns_json_string(&j, tr->by_seed ? "seed" : "tip");
+        json_vec(&j, "position_m", tr->x);
         ns_json_end_object(&j);
     }
     ns_json_end_array(&j);
     ns_json_key(&j, "seeds");
     ns_json_begin_array(&j);
+    for (int k = 0; k < r->seed_n; k++) {
+        const SeedResult *sd = &res->seeds[k];
+        ns_json_begin_object(&j);
+        ns_json_key(&j, "target");
+        ns_json_string(&j, sd->target >= 0 ? r->spec.targets[sd->target].name : "");
+        ns_json_key(&j, "error_mm");
+        ns_json_number(&j, sd->error_mm);
+        ns_json_key(&j, "released_s");
+        ns_json_number(&j, r->seeds[k].t);
+        json_vec(&j, "position_m", sd->x);
+        ns_json_end_object(&j);
+    }
     ns_json_end_array(&j);
+    ns_json_key(&j, "seeds_planned");
+    ns_json_int(&j, r->spec.seed_count);
     ns_json_key(&j, "obstacles");
     ns_json_begin_array(&j);
+    for (int k = 0; k < r->spec.obstacle_count; k++) {
+        const struct Obstacle *o = &r->obst[k];
+        ns_json_begin_object(&j);
+        ns_json_key(&j, "name");
+        ns_json_string(&j, r->spec.obstacles[k].name);
+        ns_json_key(&j, "region");
+        ns_json_string(&j, r->sc.regions[r->spec.obstacles[k].region].name);
+        ns_json_key(&j, "violated");
+        ns_json_bool(&j, o->violated);
+        ns_json_key(&j, "max_depth_mm");
+        ns_json_number(&j, 1e3 * o->max_depth);
+        ns_json_key(&j, "first_s");
+        ns_json_number(&j, o->violated ? o->first_t : 0.0);
+        ns_json_key(&j, "steps_inside");
+        ns_json_int(&j, o->steps_inside);
+        ns_json_end_object(&j);
+    }
+    ns_json_end_array(&j);
+    ns_json_key(&j, "markers");
+    ns_json_begin_array(&j);
+    for (int i = 0; i < r->spec.marker_count; i++) {
+        ns_json_begin_object(&j);
+        ns_json_key(&j, "name");
+        ns_json_string(&j, r->spec.markers[i].name);
+        json_vec(&j, "position_m", res->markers[i]);
+        ns_json_key(&j, "displacement_mm");
+        ns_json_number(&j, dist_mm(res->markers[i], r->spec.markers[i].at));
+        ns_json_end_object(&j);
+    }
     ns_json_end_array(&j);
     ns_json_key(&j, "score");
     ns_json_begin_object(&j);
-    ns_json_key(&j, "total");
-    ns_json_number(&j, score);
     ns_json_key(&j, "formula");
-    ns_json_string(&j, "provisional-targets-only/1");
+    ns_json_string(&j, "needlesim-score/1");
+    ns_json_key(&j, "total");
+    ns_json_number(&j, res->total);
+    ns_json_key(&j, "targets");
+    ns_json_number(&j, res->target_part);
+    ns_json_key(&j, "obstacle_penalty");
+    ns_json_number(&j, res->obstacle_penalty);
+    ns_json_key(&j, "obstacles_violated");
+    ns_json_int(&j, res->violated);
+    ns_json_key(&j, "insertions");
+    ns_json_int(&j, r->insertions);
+    ns_json_key(&j, "path_cut_mm");
+    ns_json_number(&j, 1e3 * r->path_cut);
+    ns_json_key(&j, "peak_axial_force_n");
+    ns_json_number(&j, r->max_axial);
+    ns_json_key(&j, "duration_s");
+    ns_json_number(&j, (double)r->steps * r->spec.dt);
     ns_json_end_object(&j);
     ns_json_key(&j, "warnings");
     ns_json_begin_object(&j);
@@ -638,6 +952,91 @@ static int write_report(Run *r, const TargetResult *tr, double score, uint64_t h
     return 0;
 }
 
+/* ---- seeds and obstacles ---- */
+
+/* Releases a seed at the needle tip: the tissue's material point there, which the tissue then
+ * carries (a seed is far smaller than an element and is not modelled as a body). The i-th
+ * seed released takes the seed plan's i-th target; beyond the plan, the nearest target at the
+ * end. */
+static int release_seed(Run *r, double t, char *err, int err_sz)
+{
+    if (r->spec.target_count == 0) {
+        ns_set_err(err, err_sz,
+                   "%s: act.drop_seed at t = %.3f s: the scenario has no targets "
+                   "for seeds",
+                   r->sc.path, t);
+        return -1;
+    }
+    const NsMesh *M = &r->tissue.mesh;
+    double b[4];
+    int tet = ns_mesh_locate_in(M, M->x, tip_of(r), r->tip_hint, 1e-6, b);
+    if (tet < 0) {
+        ns_set_err(err, err_sz,
+                   "%s: act.drop_seed at t = %.3f s: the needle tip is not in the "
+                   "tissue",
+                   r->sc.path, t);
+        return -1;
+    }
+    r->tip_hint = tet;
+    if (r->seed_n == r->seed_cap) {
+        int cap = r->seed_cap ? 2 * r->seed_cap : 16;
+        struct Seed *sd = realloc(r->seeds, (size_t)cap * sizeof *sd);
+        if (!sd) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        r->seeds = sd;
+        r->seed_cap = cap;
+    }
+    struct Seed *sd = &r->seeds[r->seed_n];
+    const int *tn = M->tet_node + 4 * tet;
+    for (int i = 0; i < 3; i++)
+        sd->u[i] = b[0] * M->u[3 * tn[0] + i] + b[1] * M->u[3 * tn[1] + i] +
+                   b[2] * M->u[3 * tn[2] + i] + b[3] * M->u[3 * tn[3] + i];
+    sd->t = t;
+    sd->target = r->seed_n < r->spec.seed_count ? r->spec.seed_target[r->seed_n] : -1;
+    sd->hint = tet;
+    r->seed_n++;
+    return 0;
+}
+
+/* Is the needle inside an obstacle's region? The point 0.1 mm behind the tip along the needle
+ * is located in the deformed tissue (the tip itself sits on a mesh node, shared by the regions
+ * around it); the depth is how far the tip got from where it went in. */
+static void check_obstacles(Run *r, double t, int exited)
+{
+    if (r->spec.obstacle_count == 0)
+        return;
+    const NsMesh *M = &r->tissue.mesh;
+    const double *x = r->rod.x;
+    int n = r->rod.nodes;
+    const double *tip = x + 3 * (n - 1), *prev = x + 3 * (n - 2);
+    double e[3] = {tip[0] - prev[0], tip[1] - prev[1], tip[2] - prev[2]};
+    double le = sqrt(dot3(e, e)), p[3];
+    for (int i = 0; i < 3; i++)
+        p[i] = tip[i] - 1e-4 * e[i] / (le > 0.0 ? le : 1.0);
+    int tet = exited ? -1 : ns_mesh_locate_in(M, M->x, p, r->tip_hint, 1e-9, NULL);
+    if (tet >= 0)
+        r->tip_hint = tet;
+    int region = tet >= 0 ? M->tet_region[tet] : -1;
+    for (int k = 0; k < r->spec.obstacle_count; k++) {
+        struct Obstacle *o = &r->obst[k];
+        bool in = region >= 0 && region == r->spec.obstacles[k].region;
+        if (in && !o->inside) {
+            memcpy(o->entry, tip, sizeof o->entry);
+            if (!o->violated)
+                o->first_t = t;
+            o->violated = true;
+        }
+        o->inside = in;
+        if (in) {
+            double d[3] = {tip[0] - o->entry[0], tip[1] - o->entry[1], tip[2] - o->entry[2]};
+            o->max_depth = fmax(o->max_depth, sqrt(dot3(d, d)));
+            o->steps_inside++;
+        }
+    }
+}
+
 /* ---- the loop ---- */
 
 static void progress(const Run *r, long total, double t)
@@ -655,22 +1054,40 @@ static void progress(const Run *r, long total, double t)
 static int run_loop(Run *r, char *err, int err_sz)
 {
     const NsRunSpec *sp = &r->spec;
-    long max_steps = r->opt.steps > 0     ? r->opt.steps
-                     : sp->duration > 0.0 ? (long)ceil(sp->duration / sp->dt - 1e-9)
-                                          : 0; /* until the script ends */
-    const long hard_cap = 10000000;
+    /* A run ends after --steps, after the scenario's duration, or when the script ends; a
+     * script that never ends stops at a cap with an error. */
+    const long hard_cap = 1000000;
+    long max_steps = r->opt.steps > 0 ? r->opt.steps : 0;
+    if (max_steps == 0 && sp->duration > 0.0) {
+        double n = ceil(sp->duration / sp->dt - 1e-9);
+        if (!(n <= (double)hard_cap)) {
+            ns_set_err(err, err_sz, "%s: ns.scenario: duration / dt is %.3g steps (at most %ld)",
+                       r->sc.where, n, hard_cap);
+            return -1;
+        }
+        max_steps = (long)n;
+    }
+    memcpy(r->last_tip, tip_of(r), sizeof r->last_tip);
     bool tty = !r->opt.quiet && isatty(fileno(stderr));
     int exited = 0, more = 1;
     double t0 = now_s();
     while (max_steps > 0 ? r->steps < max_steps : more) {
-        if (r->steps >= hard_cap) {
-            ns_set_err(err, err_sz, "%s: the script did not end within %ld steps", r->sc.path,
-                       hard_cap);
+        if (max_steps == 0 && r->steps >= hard_cap) {
+            ns_set_err(err, err_sz,
+                       "%s: the script did not end within %ld steps (give the scenario a "
+                       "duration to cut it short)",
+                       r->sc.path, hard_cap);
             return -1;
         }
         double t = (double)r->steps * sp->dt;
-        if (script_tick(r, t, exited, &more, err, err_sz))
+        int drop = 0;
+        if (script_tick(r, t, exited, &more, &drop, err, err_sz))
             return -1;
+        if (drop && release_seed(r, t, err, err_sz))
+            return -1;
+        if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
+            r->insertions++;
+        r->prev_v = r->rod.v_insert;
         if (max_steps == 0 && !more)
             break;
         NsCouplingStats st;
@@ -679,10 +1096,18 @@ static int run_loop(Run *r, char *err, int err_sz)
         double w = 1e3 * (now_s() - w0);
         r->nan += st.nan_count;
         if (rc) {
+            const double *tp = tip_of(r);
+            const NsMesh *M = &r->tissue.mesh;
+            bool outside = ns_mesh_locate_in(M, M->x, tp, r->tip_hint, 1e-6, NULL) < 0;
             ns_set_err(err, err_sz,
-                       "step %ld (t = %.4f s) failed: the coupled solve did not produce a valid "
-                       "state (NaN %d, inverted %d, unconverged %d)",
-                       r->steps, t, st.nan_count, st.inverted, st.unconverged);
+                       "%s: step %ld (t = %.4f s, tip at (%.1f, %.1f, %.1f) mm, depth %.1f mm) "
+                       "failed: %s (NaN %d, inverted %d, unconverged %d)",
+                       r->sc.path, r->steps, t, 1e3 * tp[0], 1e3 * tp[1], 1e3 * tp[2],
+                       1e3 * depth_of(r),
+                       outside ? "the needle tip left the tissue other than back through its "
+                                 "entry (exits through the far side are not modelled yet)"
+                               : "the coupled solve did not produce a valid state",
+                       st.nan_count, st.inverted, st.unconverged);
             return -1;
         }
         r->steps++;
@@ -694,7 +1119,7 @@ static int run_loop(Run *r, char *err, int err_sz)
         r->max_axial = fmax(r->max_axial, fabs(st.axial_force));
         r->last_axial = st.axial_force;
         const double *tp = tip_of(r);
-        if (st.cutting && r->steps > 1) { /* the length of tissue cut: the tip's path */
+        if (st.cutting) { /* the length of tissue cut: the tip's path */
             double d[3] = {tp[0] - r->last_tip[0], tp[1] - r->last_tip[1], tp[2] - r->last_tip[2]};
             r->path_cut += sqrt(dot3(d, d));
         }
@@ -707,15 +1132,26 @@ static int run_loop(Run *r, char *err, int err_sz)
             return -1;
         }
         const double *tip = tip_of(r);
-        fprintf(r->traj, "%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%d,%d\n",
+        fprintf(r->traj, "%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%d,%d",
                 (double)r->steps * sp->dt, tip[0], tip[1], tip[2], depth_of(r), st.axial_force,
                 r->rod.v_insert, r->rod.twist_rate, st.n_static, st.n_dyn_pos, st.n_dyn_neg,
                 st.cutting);
-        if (tty && (r->steps % 10 == 0))
+        for (int i = 0; i < sp->marker_count; i++) {
+            double x[3] = {NAN, NAN, NAN};
+            world_of(&r->tissue.mesh, sp->markers[i].at, &r->marker_hint[i], x);
+            fprintf(r->traj, ",%.9g,%.9g,%.9g", x[0], x[1], x[2]);
+        }
+        fputc('\n', r->traj);
+        check_obstacles(r, (double)r->steps * sp->dt, exited);
+        if (tty && (r->steps % 10 == 0)) {
             progress(r, max_steps, (double)r->steps * sp->dt);
+            r->progress_shown = true;
+        }
     }
-    if (tty)
+    r->script_finished = !more || !sp->has_script;
+    if (r->progress_shown)
         fputs("\r\033[K", stderr);
+    r->progress_shown = false;
     r->wall_s = now_s() - t0;
     return 0;
 }
@@ -727,6 +1163,8 @@ static void run_free(Run *r)
         luaL_unref(L, LUA_REGISTRYINDEX, r->sim_ref);
     if (L && r->act_ref != LUA_NOREF)
         luaL_unref(L, LUA_REGISTRYINDEX, r->act_ref);
+    if (L && r->co_ref != LUA_NOREF)
+        luaL_unref(L, LUA_REGISTRYINDEX, r->co_ref);
     if (r->have_c)
         ns_coupled_free(&r->c);
     if (r->have_rod)
@@ -742,6 +1180,9 @@ static void run_free(Run *r)
     for (int k = 0; k < 8; k++)
         free(s[k]->v);
     free(r->target_hint);
+    free(r->marker_hint);
+    free(r->obst);
+    free(r->seeds);
     free(r->traj_tmp);
     free(r->report_tmp);
 }
@@ -805,44 +1246,37 @@ int ns_cmd_run(int argc, char **argv)
 {
     Run r;
     memset(&r, 0, sizeof r);
-    r.sim_ref = r.act_ref = LUA_NOREF;
+    r.sim_ref = r.act_ref = r.co_ref = LUA_NOREF;
     int pa = parse_args(argc, argv, &r.opt);
     if (pa)
         return pa == 1 ? 0 : pa;
     char err[1024] = "";
-    int rc = -1;
-    if (ns_scenario_load(r.opt.scenario, &r.sc, err, sizeof err) == 0) {
+    int rc = prepare_outputs(&r, err, sizeof err) ? -2 : -1;
+    if (rc == -1 && ns_scenario_load(r.opt.scenario, &r.sc, err, sizeof err) == 0) {
         r.have_sc = true;
         if (ns_run_spec_read(&r.sc, &r.spec, err, sizeof err) == 0) {
             r.have_spec = true;
             rc = 0;
         }
     }
-    /* The actions module is bound also without a script (its _tick then answers "done"). */
+    /* `sim` and the actions module are set up also without a script (on_tick uses them). */
     rc = rc ? rc : script_start(&r, err, sizeof err);
-    rc = rc ? rc : open_outputs(&r, err, sizeof err);
+    if (rc == 0 && !r.spec.has_script && r.spec.duration <= 0.0 && r.opt.steps == 0) {
+        ns_set_err(err, sizeof err,
+                   "%s: ns.scenario: without a script the run needs a duration (or --steps N) "
+                   "to know when to stop",
+                   r.sc.where);
+        rc = -1;
+    }
+    if (rc == 0)
+        write_traj_header(&r);
     rc = rc ? rc : build(&r, err, sizeof err);
     rc = rc ? rc : run_loop(&r, err, sizeof err);
-    TargetResult *tr = NULL;
-    double score = 100.0;
-    if (rc == 0) {
-        tr = calloc((size_t)r.spec.target_count + 1, sizeof *tr);
-        if (!tr) {
-            ns_set_err(err, sizeof err, "out of memory");
-            rc = -1;
-        }
-    }
-    if (rc == 0 && r.spec.target_count > 0) {
-        score = 0.0;
-        const double *tip = tip_of(&r);
-        for (int i = 0; i < r.spec.target_count; i++) {
-            tr[i].located =
-                world_of(&r.tissue.mesh, r.spec.targets[i].at, &r.target_hint[i], tr[i].x) == 0;
-            double d[3] = {tip[0] - tr[i].x[0], tip[1] - tr[i].x[1], tip[2] - tr[i].x[2]};
-            tr[i].error_mm = tr[i].located ? 1e3 * sqrt(dot3(d, d)) : NAN;
-            tr[i].hit = tr[i].located && tr[i].error_mm <= 1e3 * r.spec.targets[i].tolerance;
-            score += target_score(&tr[i], 1e3 * r.spec.targets[i].tolerance) / r.spec.target_count;
-        }
+    Results res;
+    memset(&res, 0, sizeof res);
+    if (rc == 0 && score_run(&r, &res)) {
+        ns_set_err(err, sizeof err, "out of memory");
+        rc = -1;
     }
     uint64_t hash = rc == 0 ? ns_coupled_state_hash(&r.c) : 0;
     if (rc == 0) {
@@ -853,7 +1287,7 @@ int ns_cmd_run(int argc, char **argv)
         }
         r.traj = NULL;
     }
-    rc = rc ? rc : write_report(&r, tr, score, hash, err, sizeof err);
+    rc = rc ? rc : write_report(&r, &res, hash, err, sizeof err);
     if (rc == 0) {
         char *traj = path_join(r.opt.out_dir, "trajectory.csv");
         char *rep = path_join(r.opt.out_dir, "report.json");
@@ -871,6 +1305,8 @@ int ns_cmd_run(int argc, char **argv)
         remove_outputs(&r);
         /* Messages that name their scenario file and line (or say needlesim) print as they
          * are, as in `needlesim check`; the others get the program's name. */
+        if (r.progress_shown)
+            fputs("\r\033[K", stderr); /* the progress line goes before the message */
         size_t n = strlen(r.opt.scenario);
         bool located = strncmp(err, "needlesim", 9) == 0 || strncmp(err, r.opt.scenario, n) == 0;
         fprintf(stderr, "%s%s\n", located ? "" : "needlesim: ", err);
@@ -882,17 +1318,25 @@ int ns_cmd_run(int argc, char **argv)
                1e3 * tip_of(&r)[0], 1e3 * tip_of(&r)[1], 1e3 * tip_of(&r)[2], 1e3 * depth_of(&r),
                r.max_axial);
         if (r.spec.target_count)
-            printf("%-20s %10s %10s %5s\n", "target", "error mm", "tol mm", "hit");
+            printf("%-20s %10s %10s %5s %5s\n", "target", "error mm", "tol mm", "by", "hit");
         for (int i = 0; i < r.spec.target_count; i++)
-            printf("%-20s %10.2f %10.2f %5s\n", r.spec.targets[i].name, tr[i].error_mm,
-                   1e3 * r.spec.targets[i].tolerance, tr[i].hit ? "yes" : "no");
-        printf("score %.1f / 100; warnings: NaN %d, inverted %d, unconverged %d, friction "
-               "unresolved %d\n",
-               score, r.nan, r.inverted, r.unconverged, r.lcp_unresolved);
+            printf("%-20s %10.2f %10.2f %5s %5s\n", r.spec.targets[i].name, res.targets[i].error_mm,
+                   1e3 * r.spec.targets[i].tolerance, res.targets[i].by_seed ? "seed" : "tip",
+                   res.targets[i].hit ? "yes" : "no");
+        if (r.spec.seed_count || r.seed_n)
+            printf("seeds released %d of %d planned\n", r.seed_n, r.spec.seed_count);
+        for (int k = 0; k < r.spec.obstacle_count; k++)
+            if (r.obst[k].violated)
+                printf("obstacle %s entered at t = %.2f s, %.1f mm deep\n",
+                       r.spec.obstacles[k].name, r.obst[k].first_t, 1e3 * r.obst[k].max_depth);
+        printf("score %.1f / 100 (targets %.1f, obstacles -%.0f); insertions %d; warnings: NaN %d, "
+               "inverted %d, unconverged %d, friction unresolved %d\n",
+               res.total, res.target_part, res.obstacle_penalty, r.insertions, r.nan, r.inverted,
+               r.unconverged, r.lcp_unresolved);
         printf("wrote %s/report.json and %s/trajectory.csv (state hash %016llx)\n", r.opt.out_dir,
                r.opt.out_dir, (unsigned long long)hash);
     }
-    free(tr);
+    results_free(&res);
     run_free(&r);
     return rc ? 1 : 0;
 }

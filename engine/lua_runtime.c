@@ -354,6 +354,8 @@ static int open_sandbox(lua_State *L)
     lua_setfield(L, -2, "print");
     lua_pushcfunction(L, sandbox_require);
     lua_setfield(L, -2, "require");
+    lua_pushcfunction(L, sandbox_require); /* for the engine, whatever a script does to _G */
+    lua_setfield(L, LUA_REGISTRYINDEX, "ns.require");
     lua_pushcfunction(L, ns_where);
     lua_setfield(L, -2, "__ns_where");
 

@@ -5,8 +5,9 @@
  * package or debug. dofile, loadfile and string.dump are gone; `load` takes text only; print
  * writes to stderr (stdout belongs to --json). `require` loads `needlesim` and
  * `needlesim.<x>` from the scripts folder (NEEDLESIM_SCRIPTS, else NS_SCRIPTS_DIR) and plain
- * names from the scenario's own folder, nothing else. math.random is seeded with a constant,
- * so a scenario is deterministic unless it reseeds.
+ * names from the scenario's own folder, nothing else (the engine finds the same function in
+ * the registry as "ns.require", whatever a script does to its globals). math.random is seeded with
+ * a constant, so a scenario is deterministic unless it reseeds.
  *
  * Every entry from C into Lua goes through ns_lua_call: a protected call with a fresh
  * instruction budget (an endless loop fails instead of hanging) whose error, if any, is one

@@ -45,12 +45,111 @@ static char *str_field(lua_State *L, int idx, const char *key, const char *dflt)
     return out;
 }
 
+/* Markers, obstacles (their region names resolved) and the seed plan (target names resolved;
+ * the Lua side checked that they name targets). */
+static int read_lists(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int si, char *err,
+                      int err_sz)
+{
+    int rc = 0;
+    if (lua_getfield(L, si, "markers") == LUA_TTABLE) {
+        int li = lua_gettop(L), n = (int)lua_rawlen(L, li);
+        spec->markers = calloc((size_t)n + 1, sizeof *spec->markers);
+        if (!spec->markers)
+            rc = -1;
+        for (int i = 0; rc == 0 && i < n; i++) {
+            lua_rawgeti(L, li, i + 1);
+            NsRunMarker *m = &spec->markers[i];
+            m->name = str_field(L, lua_gettop(L), "name", "?");
+            vec_field(L, lua_gettop(L), "at", m->at);
+            spec->marker_count = i + 1;
+            lua_pop(L, 1);
+            if (!m->name)
+                rc = -1;
+            else if (ns_mesh_locate(&sc->mesh, m->at, -1, 1e-9, NULL) < 0) {
+                ns_set_err(err, err_sz,
+                           "%s: ns.scenario: markers[%d] '%s' at (%g, %g, %g) m is outside the "
+                           "tissue",
+                           sc->where, i + 1, m->name, m->at[0], m->at[1], m->at[2]);
+                return -1;
+            }
+        }
+    }
+    lua_pop(L, 1);
+    if (rc == 0 && lua_getfield(L, si, "obstacles") == LUA_TTABLE) {
+        int li = lua_gettop(L), n = (int)lua_rawlen(L, li);
+        spec->obstacles = calloc((size_t)n + 1, sizeof *spec->obstacles);
+        if (!spec->obstacles)
+            rc = -1;
+        for (int i = 0; rc == 0 && i < n; i++) {
+            lua_rawgeti(L, li, i + 1);
+            NsRunObstacle *o = &spec->obstacles[i];
+            o->name = str_field(L, lua_gettop(L), "name", "?");
+            char *region = str_field(L, lua_gettop(L), "region", "?");
+            spec->obstacle_count = i + 1;
+            lua_pop(L, 1);
+            o->region = -1;
+            for (int k = 0; region && k < sc->region_count; k++)
+                if (strcmp(sc->regions[k].name, region) == 0)
+                    o->region = k;
+            if (!o->name || !region)
+                rc = -1;
+            else if (o->region < 0) {
+                char known[512] = "";
+                for (int k = 0; k < sc->region_count; k++)
+                    snprintf(known + strlen(known), sizeof known - strlen(known), "%s'%s'",
+                             k ? ", " : "", sc->regions[k].name);
+                ns_set_err(err, err_sz,
+                           "%s: ns.scenario: obstacles[%d] '%s': region '%s' is not a region of "
+                           "the tissue (its regions: %s)",
+                           sc->where, i + 1, o->name, region, known);
+                free(region);
+                return -1;
+            }
+            free(region);
+        }
+    }
+    lua_pop(L, 1);
+    if (rc == 0 && lua_getfield(L, si, "seeds") == LUA_TTABLE) {
+        int li = lua_gettop(L), n = (int)lua_rawlen(L, li);
+        spec->seed_target = calloc((size_t)n + 1, sizeof *spec->seed_target);
+        if (!spec->seed_target)
+            rc = -1;
+        for (int i = 0; rc == 0 && i < n; i++) {
+            lua_rawgeti(L, li, i + 1);
+            char *target = str_field(L, lua_gettop(L), "target", "?");
+            lua_pop(L, 1);
+            spec->seed_target[i] = -1;
+            for (int k = 0; target && k < spec->target_count; k++)
+                if (strcmp(spec->targets[k].name, target) == 0)
+                    spec->seed_target[i] = k;
+            free(target);
+            spec->seed_count = i + 1;
+            if (spec->seed_target[i] < 0) {
+                ns_set_err(err, err_sz, "%s: ns.scenario: seeds[%d]: unknown target", sc->where,
+                           i + 1);
+                return -1;
+            }
+        }
+    }
+    lua_pop(L, 1);
+    if (rc && !err[0])
+        ns_set_err(err, err_sz, "out of memory");
+    return rc;
+}
+
 void ns_run_spec_free(NsRunSpec *spec)
 {
     free(spec->needle_kind);
     for (int i = 0; i < spec->target_count; i++)
         free(spec->targets[i].name);
     free(spec->targets);
+    for (int i = 0; i < spec->marker_count; i++)
+        free(spec->markers[i].name);
+    free(spec->markers);
+    for (int i = 0; i < spec->obstacle_count; i++)
+        free(spec->obstacles[i].name);
+    free(spec->obstacles);
+    free(spec->seed_target);
     memset(spec, 0, sizeof *spec);
 }
 
@@ -130,6 +229,9 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
             }
         }
     }
+    lua_settop(L, si);
+    if (rc == 0)
+        rc = read_lists(sc, spec, L, si, err, err_sz);
     lua_settop(L, top);
     if (rc == 0 && !spec->has_script && !spec->has_on_tick && spec->duration <= 0.0) {
         ns_set_err(err, err_sz,

@@ -15,6 +15,18 @@ typedef struct NsRunTarget {
     double tolerance; /* [m] */
 } NsRunTarget;
 
+/* A tissue point whose world position is logged (a phantom's fiducial). */
+typedef struct NsRunMarker {
+    char *name;
+    double at[3]; /* material position [m] */
+} NsRunMarker;
+
+/* A tissue region the needle must not enter. */
+typedef struct NsRunObstacle {
+    char *name;
+    int region; /* index into the scenario's regions */
+} NsRunObstacle;
+
 typedef struct NsRunSpec {
     /* ns.needle{} (the stiff default when the scenario has none) */
     char *needle_kind;
@@ -25,6 +37,12 @@ typedef struct NsRunSpec {
     double entry_point[3], entry_dir[3];
     NsRunTarget *targets;
     int target_count;
+    NsRunMarker *markers;
+    int marker_count;
+    NsRunObstacle *obstacles;
+    int obstacle_count;
+    int *seed_target; /* the seed plan: the target index of each planned seed */
+    int seed_count;
     double dt;       /* [s]: the scenario's, else 0.01 */
     double duration; /* [s]: the scenario's, else 0 (until the script ends) */
     bool has_script, has_on_tick;

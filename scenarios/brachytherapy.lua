@@ -23,7 +23,15 @@
 -- The capsule of the prostate (0.5 mm) and the skin (1 mm) are far thinner than an element:
 -- as in the paper (§3.3) they are membranes that raise the cutting force where the needle
 -- crosses the region's surface (see the materials' `membrane` field), not separate regions.
+--
+-- The run (needlesim run scenarios/brachytherapy.lua): one needle through the template hole at
+-- x = +8 mm, y = -4 mm (left of the urethra, above the rectum) into the prostate, two seeds
+-- left on the way back at the planned depths, then the needle out. A flexible bevel-tip needle
+-- by default, spun as it goes in so that its bevel does not steer it off the line (the paper's
+-- ProsFB; ns.needle{kind = "stiff"} is its ProsSS). The urethra, rectum and pubic arch are
+-- obstacles; each one entered costs 25 points.
 local ns = require "needlesim"
+local act = require "needlesim.actions"
 local M = ns.materials
 
 local shape = ns.shape
@@ -51,9 +59,34 @@ local pubic_arch = shape.union(
   shape.capsule { a = { -0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 },
   shape.capsule { a = { 0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 })
 
+-- The template hole and the planned seeds (depth from the skin along the needle) [m].
+local hole = { 0.008, -0.004 }
+local seed_depths = { 0.060, 0.048 }
+
 return ns.scenario {
   name = "prostate brachytherapy",
   description = "Transperineal insertion into a synthetic male pelvis (paper Fig. 1).",
+  dt = 0.01,
+  needle = ns.needle { kind = "flexible", bevel_deg = 30 },
+  entry = { point = { hole[1], hole[2], 0 }, direction = { 0, 0, 1 } },
+  targets = {
+    { name = "base seed", at = { hole[1], hole[2], seed_depths[1] }, tolerance = 3e-3 },
+    { name = "mid seed", at = { hole[1], hole[2], seed_depths[2] }, tolerance = 3e-3 },
+  },
+  seeds = { { target = "base seed" }, { target = "mid seed" } },
+  obstacles = {
+    { name = "urethra", region = "urethra" },
+    { name = "rectum", region = "rectum" },
+    { name = "pubic arch", region = "pubic_arch" },
+  },
+  script = function()
+    act.insert { speed = 0.02, depth = seed_depths[1], spin = 2 * math.pi } -- 20 mm/s, 1 turn/s
+    act.drop_seed {}
+    act.retract { speed = 0.02, depth = seed_depths[2] }
+    act.drop_seed {}
+    act.retract { speed = 0.02 } -- out
+    act.wait { time = 0.2 } -- the tissue settles around the seeds
+  end,
   tissue = ns.tissue.shapes {
     resolution = 8.8e-3,
     -- Later regions override earlier ones where they overlap.

@@ -2,7 +2,8 @@
 --
 -- What it teaches: the parts every scenario has. A block of gel (the tissue), a needle, where
 -- the needle goes in (entry), a target to reach, and a script that drives the needle: in to
--- the target's depth, a short wait while the tissue settles, and back out.
+-- the target's depth, then a short wait while the tissue settles. The target moves with the
+-- tissue the needle pushes; the report scores where the tip ended against where the target is.
 --
 --   needlesim run scenarios/tutorial.lua -o out/tutorial
 local ns = require "needlesim"
@@ -12,7 +13,7 @@ local h = 0.005 -- lattice spacing [m]: 5 mm
 
 return ns.scenario {
     name = "tutorial",
-    description = "a stiff needle into a gel block, to a target 3 cm deep, and out",
+    description = "a stiff needle into a gel block, to a target 3 cm deep",
     dt = 0.01, -- time step [s]
     tissue = ns.tissue.box {
         size = { 8 * h, 8 * h, 10 * h }, -- 4 x 4 x 5 cm

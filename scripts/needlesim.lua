@@ -835,10 +835,37 @@ local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "durati
     "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
     "accuracy", "solver" }
 -- Accepted now and checked by the stages that use them (later versions).
-local RESERVED = { "obstacles", "markers", "seeds", "camera", "accuracy", "solver" }
+local RESERVED = { "camera", "accuracy", "solver" }
 
 local ENTRY_FIELDS = { "point", "direction" }
 local TARGET_FIELDS = { "name", "at", "tolerance" }
+local MARKER_FIELDS = { "name", "at" }
+local OBSTACLE_FIELDS = { "name", "region" }
+local SEED_FIELDS = { "target" }
+
+-- A list field of tables, each checked by `one(args, i)`; names unique when `named`.
+local function list_of(v, where, field, fields, one, named)
+    if v == nil then
+        return {}
+    end
+    if type(v) ~= "table" or kind_of(v) then
+        raise(where, "ns.scenario", fmt("%s must be a list of {%s} (got %s)", field,
+            concat(fields, ", "), describe(v)))
+    end
+    local out, names = {}, {}
+    for i, item in ipairs(v) do
+        local a = args(item, fmt("ns.scenario: %s[%d]", field, i), where, fields)
+        local x = one(a)
+        if named then
+            if names[x.name] then
+                a:fail("name '%s' is used by %s[%d] already", x.name, field, names[x.name])
+            end
+            names[x.name] = i
+        end
+        out[i] = x
+    end
+    return out
+end
 
 -- entry = {point, direction}: where the needle's sleeve meets the skin and the way it points.
 local function entry_of(v, where)
@@ -911,6 +938,25 @@ function ns.scenario(t)
     sc.needle = needle
     sc.entry = entry_of(t.entry, where)
     sc.targets = targets_of(t.targets, where)
+    sc.markers = list_of(t.markers, where, "markers", MARKER_FIELDS, function(m)
+        return { name = m:string("name"), at = m:vec3("at", ANY, " [m]") }
+    end, true)
+    sc.obstacles = list_of(t.obstacles, where, "obstacles", OBSTACLE_FIELDS, function(o)
+        return { name = o:string("name"), region = o:string("region") }
+    end, true)
+    sc.seeds = list_of(t.seeds, where, "seeds", SEED_FIELDS, function(o)
+        return { target = o:string("target") }
+    end, false)
+    local tnames = {}
+    for _, tg in ipairs(sc.targets) do
+        tnames[tg.name] = true
+    end
+    for i, sd in ipairs(sc.seeds) do
+        if not tnames[sd.target] then
+            raise(where, "ns.scenario", fmt("seeds[%d]: target '%s' is not one of the targets",
+                i, sd.target))
+        end
+    end
     for _, k in ipairs(RESERVED) do
         sc[k] = t[k]
     end

@@ -5,17 +5,55 @@
 # speed, an unwritable output folder) exits 1 naming the file and line or field and leaves no
 # report.json; usage errors exit 2.
 #
-# usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR
+# With `brachytherapy` as third argument it runs the brachytherapy scenario instead (a separate
+# meson test, not in the sanitizer build): it succeeds, every report field is finite, both seeds
+# are released, the shipped script hits at least one target, and no obstacle is entered.
+#
+# usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR [brachytherapy]
 set -u
 
-BIN=${1:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR}
-SRC=${2:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR}
+BIN=${1:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR [brachytherapy]}
+SRC=${2:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR [brachytherapy]}
+PART=${3:-tutorial}
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-run.XXXXXX") || exit 1
 trap 'rm -rf "$TMP"' EXIT
 PASSED=0
 FAILED=0
 pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
 fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
+
+if [ "$PART" = brachytherapy ]; then
+"$BIN" run "$SRC/scenarios/brachytherapy.lua" --no-render -o "$TMP/b" >"$TMP/out" 2>"$TMP/err"
+rc=$?
+cat "$TMP/out"
+if [ $rc = 0 ]; then pass "brachytherapy runs"; else fail "brachytherapy runs" "exit $rc: $(tail -2 "$TMP/err")"; fi
+python3 - "$TMP/b/report.json" <<'PY' >"$TMP/py" 2>&1
+import json, math, sys
+r = json.load(open(sys.argv[1]))
+def finite(v, path):
+    if isinstance(v, (bool, str)):
+        return
+    assert v is not None, "null at " + path
+    if isinstance(v, (int, float)):
+        assert math.isfinite(v), "non-finite at " + path
+    elif isinstance(v, list):
+        [finite(x, "%s[%d]" % (path, i)) for i, x in enumerate(v)]
+    elif isinstance(v, dict):
+        [finite(x, path + "." + k) for k, x in v.items()]
+finite(r, "report")
+assert len(r["seeds"]) == 2 == r["seeds_planned"], r["seeds"]
+hits = [t["name"] for t in r["targets"] if t["hit"]]
+assert hits, "no target hit: " + ", ".join("%s %.2f mm" % (t["name"], t["error_mm"]) for t in r["targets"])
+bad = [o["name"] for o in r["obstacles"] if o["violated"]]
+assert not bad, "obstacles entered: %s" % bad
+assert r["script_finished"] and r["needle"]["depth_m"] < 0.002
+print("hit: " + ", ".join(hits) + "; errors " + ", ".join("%.2f mm" % t["error_mm"] for t in r["targets"]))
+PY
+if [ $? = 0 ]; then pass "report finite, seeds released, a target hit, no obstacle entered ($(cat "$TMP/py"))"; else fail "report" "$(tail -1 "$TMP/py")"; fi
+    echo "$PASSED passed, $FAILED failed"
+    [ "$FAILED" = 0 ]
+    exit
+fi
 
 TUT="$SRC/scenarios/tutorial.lua"
 
@@ -101,6 +139,30 @@ bad negative_speed 's/speed = 0.02, depth/speed = -0.02, depth/' \
 bad no_entry 's/^    entry = .*$//' "no_entry.lua:[0-9]+: ns.scenario: missing field 'entry'"
 bad bad_tolerance 's/tolerance = 2e-3/tolerance = -1/' \
     "bad_tolerance.lua:[0-9]+: ns.scenario: targets\[1\]: tolerance must be a number > 0"
+# Errors that only show while running: the output folder is then created, so the check that no
+# report.json is left (and that an earlier run's is gone) can fail.
+bad_running() { # name, sed expression, expected message (grep -E)
+    sed "$2" "$TUT" >"$TMP/$1.lua"
+    mkdir -p "$TMP/o_$1"
+    echo '{"stale": true}' >"$TMP/o_$1/report.json"
+    "$BIN" run "$TMP/$1.lua" -o "$TMP/o_$1" --quiet >"$TMP/out_$1" 2>"$TMP/err_$1"
+    local rc=$?
+    if [ $rc = 1 ] && grep -Eq "$3" "$TMP/err_$1" && [ ! -e "$TMP/o_$1/report.json" ] &&
+        [ ! -e "$TMP/o_$1/trajectory.csv" ] && [ -z "$(ls -A "$TMP/o_$1")" ]; then
+        pass "$1: exit 1, nothing left in the folder, $(head -1 "$TMP/err_$1" | sed "s|$TMP/||")"
+    else
+        fail "$1" "exit $rc: $(head -2 "$TMP/err_$1"); left: $(ls -A "$TMP/o_$1" | tr '\n' ' ')"
+    fi
+}
+bad_running on_tick_error 's/^    script = function()$/    on_tick = function(sim) if sim.step == 5 then error("boom") end end,\n    script = function()/' \
+    "on_tick_error.lua:[0-9]+: boom"
+bad_running control_nan 's/^    script = function()$/    on_tick = function(sim) if sim.step == 3 then sim.control.v_insert = 0\/0 end end,\n    script = function()/' \
+    "sim.control.v_insert must be a finite number"
+bad_running error_table 's/act.wait { time = 0.2 }/act.wait { time = 0.2 }; error({})/' \
+    "error_table.lua:[0-9]+: error \(not a string\)"
+bad_running too_deep 's/depth = 0.03 }/depth = 0.3 }/' \
+    "too_deep.lua(:[0-9]+: act.insert: the needle does not advance|: step [0-9]+ .*failed)"
+
 touch "$TMP/a_file"
 "$BIN" run "$TUT" -o "$TMP/a_file/out" --quiet >/dev/null 2>"$TMP/err_dir"
 rc=$?
@@ -108,6 +170,27 @@ if [ $rc = 1 ] && grep -q "cannot create output folder" "$TMP/err_dir"; then
     pass "unwritable output folder: exit 1"
 else
     fail "unwritable output folder" "exit $rc: $(head -1 "$TMP/err_dir")"
+fi
+
+# A twist and a retraction out of the tissue, into a nested output folder that does not exist.
+sed 's/act.wait { time = 0.2 }/act.twist { angle = math.pi \/ 2, rate = math.pi }; act.retract { speed = 0.04 }/' \
+    "$TUT" >"$TMP/twist_out.lua"
+"$BIN" run "$TMP/twist_out.lua" -o "$TMP/nested/a/b" --quiet >/dev/null 2>"$TMP/err_tw"
+rc=$?
+if [ $rc = 0 ] && python3 - "$TMP/nested/a/b/report.json" "$TMP/nested/a/b/trajectory.csv" <<'PY' 2>"$TMP/py_tw"
+import json, sys
+r = json.load(open(sys.argv[1]))
+rows = [l.split(",") for l in open(sys.argv[2]).read().splitlines()[1:]]
+twist = [float(x[7]) for x in rows]
+assert max(twist) > 3.0, "no twist in the trajectory"
+assert any(float(x[6]) < 0 for x in rows), "no retraction in the trajectory"
+assert r["needle"]["depth_m"] < 0.002, "the needle is not out: depth %g" % r["needle"]["depth_m"]
+assert r["script_finished"] is True
+PY
+then
+    pass "twist, then retract out, into a nested new folder"
+else
+    fail "twist and retract" "exit $rc: $(head -1 "$TMP/err_tw") $(tail -1 "$TMP/py_tw")"
 fi
 
 # Usage errors: exit 2.

@@ -54,6 +54,8 @@ run)
     mkdir -p "$out"
     ./build/needlesim check scenarios/brachytherapy.lua --mesh-out "$out/tissue.vtu"
     echo "mesh written to $out/tissue.vtu" >&2
+    # The run: the needle in, two seeds, out; the report and trajectory (no video yet: issue 8).
+    ./build/needlesim run scenarios/brachytherapy.lua -o "$out"
     ;;
 test)
     passed=0; failed=0

@@ -55,6 +55,10 @@ local function number(t, name, k, test, what, default)
     return v
 end
 
+-- An insertion or retraction whose depth has not moved by 0.01 mm for this long [s] of
+-- simulated time is stuck: the action fails instead of waiting for ever.
+local STALL_TIME = 2
+
 local function GT0(x) return x > 0 end
 local function GE0(x) return x >= 0 end
 local function ANY() return true end
@@ -74,16 +78,26 @@ local function stop()
     sim.control.twist_rate = 0
 end
 
---- act.insert{speed, depth}: push the needle in at `speed` [m/s] until its tip is `depth` [m]
--- past the entry point (measured along the entry direction).
+--- act.insert{speed, depth, spin}: push the needle in at `speed` [m/s] until its tip is `depth`
+-- [m] past the entry point (measured along the entry direction), the base turning at `spin`
+-- [rad/s] meanwhile (default 0; spinning a bevel needle as it goes in averages its bend away).
 function act.insert(t)
     running()
-    fields(t, "insert", { "speed", "depth" })
+    fields(t, "insert", { "speed", "depth", "spin" })
     local speed = number(t, "insert", "speed", GT0, "> 0 [m/s]")
     local depth = number(t, "insert", "depth", GT0, "> 0 [m]")
+    local spin = number(t, "insert", "spin", ANY, "[rad/s]", 0)
+    local best, since = sim.depth, sim.t
     while sim.depth < depth do
         sim.control.v_insert = speed
+        sim.control.twist_rate = spin
         tick()
+        if sim.depth > best + 1e-5 then
+            best, since = sim.depth, sim.t
+        elseif sim.t - since > STALL_TIME then
+            error(fmt("act.insert: the needle does not advance: depth %.1f mm for %g s, %.1f mm "
+                .. "wanted", 1e3 * sim.depth, STALL_TIME, 1e3 * depth), 2)
+        end
     end
     stop()
 end
@@ -95,9 +109,16 @@ function act.retract(t)
     fields(t, "retract", { "speed", "depth" })
     local speed = number(t, "retract", "speed", GT0, "> 0 [m/s]")
     local depth = number(t, "retract", "depth", GE0, ">= 0 [m]", 0)
+    local best, since = sim.depth, sim.t
     while sim.depth > depth and not sim.exited do
         sim.control.v_insert = -speed
         tick()
+        if sim.depth < best - 1e-5 then
+            best, since = sim.depth, sim.t
+        elseif sim.t - since > STALL_TIME then
+            error(fmt("act.retract: the needle does not come back: depth %.1f mm for %g s, %.1f "
+                .. "mm wanted", 1e3 * sim.depth, STALL_TIME, 1e3 * depth), 2)
+        end
     end
     stop()
 end
@@ -132,26 +153,22 @@ function act.wait(t)
     end
 end
 
--- For the engine: bind the run's `sim` table and the script; then call act._tick() once per
--- time step before the solver steps. Returns true while the script has more to do.
+--- act.drop_seed{}: release a seed at the needle tip (brachytherapy). It stays in the tissue
+-- where it was released and moves with it; the i-th seed released is scored against the
+-- scenario's i-th planned seed's target (`seeds`), later ones against the nearest target.
+function act.drop_seed(t)
+    running()
+    fields(t == nil and {} or t, "drop_seed", {})
+    sim.control.drop_seed = true
+    tick()
+end
+
+-- For the engine: binds the run's `sim` table and returns the script's coroutine (nil without
+-- a script), which the engine resumes once per time step before the solver steps.
 function act._bind(s, script)
     sim = s
     co = script and coroutine.create(script) or nil
-end
-
-function act._tick()
-    if co == nil or coroutine.status(co) == "dead" then
-        return false
-    end
-    local ok, err = coroutine.resume(co)
-    if not ok then
-        error(err, 0)
-    end
-    if coroutine.status(co) == "dead" then
-        stop()
-        return false
-    end
-    return true
+    return co
 end
 
 return act
