@@ -24,6 +24,7 @@
 #include <unistd.h>
 
 #include "commands.h"
+#include "control_log.h"
 #include "coupling.h"
 #include "err.h"
 #include "json.h"
@@ -38,10 +39,10 @@
 
 static const char run_usage[] =
     "usage: needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]\n"
-    "                     [--no-render] [--quiet]\n";
+    "                     [--record LOG.csv | --replay LOG.csv] [--no-render] [--quiet]\n";
 
 typedef struct RunOpts {
-    const char *scenario, *out_dir;
+    const char *scenario, *out_dir, *record, *replay;
     long steps; /* 0: the scenario decides */
     int threads;
     int solver; /* NsCoupledSolverKind */
@@ -151,7 +152,9 @@ typedef struct Run {
     int tip_hint, insertions;
     double prev_v;
     /* output */
-    char *traj_tmp, *report_tmp;
+    char *traj_tmp, *report_tmp, *rec_tmp;
+    FILE *rec;
+    NsControlLog replay;
     bool made_dir, progress_shown, script_finished;
     FILE *traj;
 } Run;
@@ -507,6 +510,26 @@ static int tick_body(lua_State *L)
         *dst[k] = v;
         lua_pop(L, 1);
     }
+    /* The sleeve's velocity: {vx, vy, vz} [m/s], absent = still. */
+    int bt = get_raw(L, ci, "base_velocity");
+    double vb[3] = {0.0, 0.0, 0.0};
+    if (bt == LUA_TTABLE) {
+        int bi = lua_gettop(L);
+        for (int k = 0; k < 3; k++) {
+            int ty = lua_rawgeti(L, bi, k + 1);
+            vb[k] = lua_tonumber(L, -1);
+            if (ty != LUA_TNUMBER || !isfinite(vb[k]))
+                bt = LUA_TNONE;
+            lua_pop(L, 1);
+        }
+    }
+    if (bt != LUA_TTABLE && bt != LUA_TNIL)
+        return luaL_error(L,
+                          "%s: sim.control.base_velocity must be {vx, vy, vz}: 3 finite "
+                          "numbers [m/s] or nil",
+                          r->sc.path);
+    memcpy(r->rod.v_base, vb, sizeof vb);
+    lua_pop(L, 1);
     /* act.drop_seed{} raises a one-shot flag */
     io->drop = get_raw(L, ci, "drop_seed") != LUA_TNIL && lua_toboolean(L, -1);
     lua_pop(L, 1);
@@ -612,6 +635,11 @@ static void write_traj_header(Run *r)
 
 static void remove_outputs(Run *r)
 {
+    if (r->rec)
+        fclose(r->rec);
+    r->rec = NULL;
+    if (r->rec_tmp)
+        remove(r->rec_tmp);
     if (r->traj)
         fclose(r->traj);
     r->traj = NULL;
@@ -1081,8 +1109,30 @@ static int run_loop(Run *r, char *err, int err_sz)
         }
         double t = (double)r->steps * sp->dt;
         int drop = 0;
-        if (script_tick(r, t, exited, &more, &drop, err, err_sz))
+        if (r->opt.replay) { /* the log drives the needle instead of the script */
+            more = r->steps < r->replay.n;
+            if (!more && max_steps > 0) {
+                ns_set_err(err, err_sz, "%s: the log ends after %ld steps, before the run's %ld",
+                           r->opt.replay, r->replay.n, max_steps);
+                return -1;
+            }
+            if (more) {
+                const NsControl *c = &r->replay.rows[r->steps];
+                r->rod.v_insert = c->v_insert;
+                memcpy(r->rod.v_base, c->v_base, sizeof c->v_base);
+                r->rod.twist_rate = c->twist_rate;
+                drop = c->drop_seed;
+            }
+        } else if (script_tick(r, t, exited, &more, &drop, err, err_sz)) {
             return -1;
+        }
+        if (r->rec && (more || max_steps > 0)) {
+            NsControl c = {r->rod.v_insert,
+                           {r->rod.v_base[0], r->rod.v_base[1], r->rod.v_base[2]},
+                           r->rod.twist_rate,
+                           drop};
+            ns_control_log_write_row(r->rec, t, &c);
+        }
         if (drop && release_seed(r, t, err, err_sz))
             return -1;
         if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
@@ -1148,7 +1198,7 @@ static int run_loop(Run *r, char *err, int err_sz)
             r->progress_shown = true;
         }
     }
-    r->script_finished = !more || !sp->has_script;
+    r->script_finished = !more || !sp->has_script || r->opt.replay;
     if (r->progress_shown)
         fputs("\r\033[K", stderr);
     r->progress_shown = false;
@@ -1185,6 +1235,8 @@ static void run_free(Run *r)
     free(r->seeds);
     free(r->traj_tmp);
     free(r->report_tmp);
+    free(r->rec_tmp);
+    ns_control_log_free(&r->replay);
 }
 
 static int parse_args(int argc, char **argv, RunOpts *o)
@@ -1199,13 +1251,18 @@ static int parse_args(int argc, char **argv, RunOpts *o)
             fputs(run_usage, stdout);
             return 1;
         } else if (strcmp(a, "-o") == 0 || strcmp(a, "--steps") == 0 ||
-                   strcmp(a, "--threads") == 0 || strcmp(a, "--solver") == 0) {
+                   strcmp(a, "--threads") == 0 || strcmp(a, "--solver") == 0 ||
+                   strcmp(a, "--record") == 0 || strcmp(a, "--replay") == 0) {
             if (!v)
                 return usage_error("%s needs a value", a);
             i++;
             char *end;
             if (strcmp(a, "-o") == 0) {
                 o->out_dir = v;
+            } else if (strcmp(a, "--record") == 0) {
+                o->record = v;
+            } else if (strcmp(a, "--replay") == 0) {
+                o->replay = v;
             } else if (strcmp(a, "--solver") == 0) {
                 o->solver = ns_coupled_solver_parse(v);
                 if (o->solver < 0)
@@ -1224,8 +1281,7 @@ static int parse_args(int argc, char **argv, RunOpts *o)
         } else if (strcmp(a, "--quiet") == 0) {
             o->quiet = true;
         } else if (strcmp(a, "--frames") == 0 || strcmp(a, "--video") == 0 ||
-                   strcmp(a, "--set") == 0 || strcmp(a, "--record") == 0 ||
-                   strcmp(a, "--replay") == 0 || strcmp(a, "--width") == 0 ||
+                   strcmp(a, "--set") == 0 || strcmp(a, "--width") == 0 ||
                    strcmp(a, "--height") == 0) {
             fprintf(stderr, "needlesim run: %s is not available in this version yet\n", a);
             return 2;
@@ -1239,6 +1295,8 @@ static int parse_args(int argc, char **argv, RunOpts *o)
     }
     if (!o->scenario)
         return usage_error("%s", "missing SCENARIO.lua");
+    if (o->record && o->replay && strcmp(o->record, o->replay) == 0)
+        return usage_error("--record and --replay name the same file '%s'", o->record);
     return 0;
 }
 
@@ -1261,12 +1319,29 @@ int ns_cmd_run(int argc, char **argv)
     }
     /* `sim` and the actions module are set up also without a script (on_tick uses them). */
     rc = rc ? rc : script_start(&r, err, sizeof err);
-    if (rc == 0 && !r.spec.has_script && r.spec.duration <= 0.0 && r.opt.steps == 0) {
+    if (rc == 0 && !r.spec.has_script && r.spec.duration <= 0.0 && r.opt.steps == 0 &&
+        !r.opt.replay) {
         ns_set_err(err, sizeof err,
                    "%s: ns.scenario: without a script the run needs a duration (or --steps N) "
                    "to know when to stop",
                    r.sc.where);
         rc = -1;
+    }
+    if (rc == 0 && r.opt.replay)
+        rc = ns_control_log_read(r.opt.replay, r.spec.dt, &r.replay, err, sizeof err);
+    if (rc == 0 && r.opt.record) {
+        size_t n = strlen(r.opt.record) + 6;
+        r.rec_tmp = malloc(n);
+        if (r.rec_tmp)
+            snprintf(r.rec_tmp, n, "%s.part", r.opt.record);
+        r.rec = r.rec_tmp ? fopen(r.rec_tmp, "w") : NULL;
+        if (!r.rec) {
+            ns_set_err(err, sizeof err, "cannot write the control log '%s': %s", r.opt.record,
+                       strerror(errno));
+            rc = -1;
+        } else {
+            ns_control_log_write_header(r.rec);
+        }
     }
     if (rc == 0)
         write_traj_header(&r);
@@ -1288,6 +1363,15 @@ int ns_cmd_run(int argc, char **argv)
         r.traj = NULL;
     }
     rc = rc ? rc : write_report(&r, &res, hash, err, sizeof err);
+    if (rc == 0 && r.rec) {
+        int bad = fclose(r.rec) != 0;
+        r.rec = NULL;
+        if (bad || rename(r.rec_tmp, r.opt.record) != 0) {
+            ns_set_err(err, sizeof err, "cannot write the control log '%s': %s", r.opt.record,
+                       strerror(errno));
+            rc = -1;
+        }
+    }
     if (rc == 0) {
         char *traj = path_join(r.opt.out_dir, "trajectory.csv");
         char *rep = path_join(r.opt.out_dir, "report.json");

@@ -23,7 +23,8 @@ pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
 fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
 
 if [ "$PART" = brachytherapy ]; then
-"$BIN" run "$SRC/scenarios/brachytherapy.lua" --no-render -o "$TMP/b" >"$TMP/out" 2>"$TMP/err"
+"$BIN" run "$SRC/scenarios/brachytherapy.lua" --no-render -o "$TMP/b" --record "$TMP/b.csv" \
+    >"$TMP/out" 2>"$TMP/err"
 rc=$?
 cat "$TMP/out"
 if [ $rc = 0 ]; then pass "brachytherapy runs"; else fail "brachytherapy runs" "exit $rc: $(tail -2 "$TMP/err")"; fi
@@ -50,6 +51,13 @@ assert r["script_finished"] and r["needle"]["depth_m"] < 0.002
 print("hit: " + ", ".join(hits) + "; errors " + ", ".join("%.2f mm" % t["error_mm"] for t in r["targets"]))
 PY
 if [ $? = 0 ]; then pass "report finite, seeds released, a target hit, no obstacle entered ($(cat "$TMP/py"))"; else fail "report" "$(tail -1 "$TMP/py")"; fi
+# The log replayed (seed events included): the same state and score.
+"$BIN" run "$SRC/scenarios/brachytherapy.lua" --no-render -o "$TMP/b2" --replay "$TMP/b.csv" \
+    --quiet >/dev/null 2>"$TMP/err2"
+get='import json,sys; r=json.load(open(sys.argv[1])); print(r["state_hash"], r["score"]["total"], len(r["seeds"]))'
+a=$(python3 -c "$get" "$TMP/b/report.json" 2>/dev/null)
+b=$(python3 -c "$get" "$TMP/b2/report.json" 2>/dev/null)
+if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "--record then --replay: same state hash, score and seeds ($a)"; else fail "replay" "$a / $b: $(head -1 "$TMP/err2")"; fi
     echo "$PASSED passed, $FAILED failed"
     [ "$FAILED" = 0 ]
     exit
@@ -58,7 +66,7 @@ fi
 TUT="$SRC/scenarios/tutorial.lua"
 
 # The tutorial, one thread, then two.
-"$BIN" run "$TUT" -o "$TMP/t1" --threads 1 >"$TMP/out1" 2>"$TMP/err1"
+"$BIN" run "$TUT" -o "$TMP/t1" --threads 1 --record "$TMP/t1.csv" >"$TMP/out1" 2>"$TMP/err1"
 rc=$?
 cat "$TMP/out1"
 if [ $rc = 0 ] && [ -f "$TMP/t1/report.json" ] && [ -f "$TMP/t1/trajectory.csv" ]; then
@@ -117,6 +125,38 @@ if [ $? = 0 ]; then pass "report keys present and finite, target hit ($(cat "$TM
 h1=$(grep '"state_hash"' "$TMP/t1/report.json")
 h2=$(grep '"state_hash"' "$TMP/t2/report.json" 2>/dev/null)
 if [ -n "$h1" ] && [ "$h1" = "$h2" ]; then pass "same state hash with 1 and 2 threads"; else fail "state hash, 1 vs 2 threads" "$h1 / $h2"; fi
+
+# The recorded controls replayed: the same state and score.
+same_run() { # name, report A, report B
+    local a b
+    local get='import json,sys; r=json.load(open(sys.argv[1])); print(r["state_hash"], r["score"]["total"])'
+    a=$(python3 -c "$get" "$2" 2>/dev/null)
+    b=$(python3 -c "$get" "$3" 2>/dev/null)
+    if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "$1"; else fail "$1" "$a / $b"; fi
+}
+"$BIN" run "$TUT" -o "$TMP/t3" --replay "$TMP/t1.csv" --quiet >/dev/null 2>"$TMP/err3"
+same_run "--record then --replay: same state hash and score" "$TMP/t1/report.json" "$TMP/t3/report.json"
+if [ "$(wc -l <"$TMP/t1.csv")" = "$(($(grep -o '"steps": [0-9]*' "$TMP/t1/report.json" | grep -o '[0-9]*$') + 1))" ]; then
+    pass "the log has a header and one row per step"
+else
+    fail "log rows" "$(wc -l <"$TMP/t1.csv") lines"
+fi
+# A malformed row: exit 1 naming the log's line, nothing written.
+bad_log() { # name, sed expression on the log, expected message (grep -E)
+    sed "$2" "$TMP/t1.csv" >"$TMP/$1.csv"
+    "$BIN" run "$TUT" -o "$TMP/o_$1" --replay "$TMP/$1.csv" --quiet >/dev/null 2>"$TMP/err_$1"
+    local rc=$?
+    if [ $rc = 1 ] && grep -Eq "$3" "$TMP/err_$1" && [ ! -e "$TMP/o_$1/report.json" ]; then
+        pass "$1: exit 1, $(head -1 "$TMP/err_$1" | sed "s|$TMP/||")"
+    else
+        fail "$1" "exit $rc: $(head -2 "$TMP/err_$1")"
+    fi
+}
+bad_log log_bad_number '5s/^\([^,]*\),[^,]*,/\1,fast,/' "log_bad_number.csv:5: v_insert_m_s must be a finite number \(got 'fast'\)"
+bad_log log_short_row '7s/,[^,]*$//' "log_short_row.csv:7: expected 7 comma-separated fields"
+bad_log log_bad_time '9s/^[^,]*,/0.5,/' "log_bad_time.csv:9: t_s is 0.5 but row 8"
+bad_log log_bad_event '4s/,$/,explode/' "log_bad_event.csv:4: unknown event 'explode'"
+bad_log log_bad_header '1s/t_s/time/' "log_bad_header.csv:1: the header must be"
 
 # Bad input: exit 1, one line naming the file and line or field, no report.json.
 bad() { # name, sed expression on the tutorial, expected message (grep -E)

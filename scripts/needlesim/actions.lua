@@ -153,6 +153,27 @@ function act.wait(t)
     end
 end
 
+--- act.move_base{velocity, time}: move the needle's sleeve (its base and the entry guide) at
+-- `velocity` {vx, vy, vz} [m/s] for `time` [s], the insertion and twist paused.
+function act.move_base(t)
+    running()
+    fields(t, "move_base", { "velocity", "time" })
+    local v = t.velocity
+    if type(v) ~= "table" or #v ~= 3 or not (finite(v[1]) and finite(v[2]) and finite(v[3])) then
+        error(fmt("act.move_base: velocity must be {vx, vy, vz}: 3 finite numbers [m/s] (got %s)",
+            tostring(v)), 2)
+    end
+    local time = number(t, "move_base", "time", GT0, "> 0 [s]")
+    local n = math.floor(time / sim.dt + 0.5)
+    for _ = 1, n do
+        sim.control.v_insert = 0
+        sim.control.twist_rate = 0
+        sim.control.base_velocity = { v[1], v[2], v[3] }
+        tick()
+    end
+    sim.control.base_velocity = nil
+end
+
 --- act.drop_seed{}: release a seed at the needle tip (brachytherapy). It stays in the tissue
 -- where it was released and moves with it; the i-th seed released is scored against the
 -- scenario's i-th planned seed's target (`seeds`), later ones against the nearest target.

@@ -1,0 +1,161 @@
+/* Trainee control logs (control_log.h). */
+#include "control_log.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "err.h"
+
+void ns_control_log_free(NsControlLog *log)
+{
+    free(log->rows);
+    log->rows = NULL;
+    log->n = 0;
+}
+
+void ns_control_log_write_header(FILE *f)
+{
+    fputs(NS_CONTROL_LOG_HEADER "\n", f);
+}
+
+void ns_control_log_write_row(FILE *f, double t, const NsControl *c)
+{
+    fprintf(f, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s\n", t, c->v_insert, c->v_base[0],
+            c->v_base[1], c->v_base[2], c->twist_rate, c->drop_seed ? "drop_seed" : "");
+}
+
+/* Strips a trailing "\n" and "\r". */
+static void chomp(char *s)
+{
+    size_t n = strlen(s);
+    while (n > 0 && (s[n - 1] == '\n' || s[n - 1] == '\r'))
+        s[--n] = '\0';
+}
+
+static const char *const columns[7] = {"t_s",         "v_insert_m_s", "base_vx_m_s",
+                                       "base_vy_m_s", "base_vz_m_s",  "twist_rate_rad_s",
+                                       "event"};
+
+int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz)
+{
+    memset(log, 0, sizeof *log);
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        ns_set_err(err, err_sz, "cannot open control log '%s': %s", path, strerror(errno));
+        return -1;
+    }
+    char line[1024];
+    long lineno = 0, cap = 0, blank = 0;
+    int rc = 0;
+    if (!fgets(line, sizeof line, f)) {
+        ns_set_err(err, err_sz, "%s:1: empty control log (want the header %s)", path,
+                   NS_CONTROL_LOG_HEADER);
+        rc = -1;
+    } else {
+        lineno = 1;
+        chomp(line);
+        if (strcmp(line, NS_CONTROL_LOG_HEADER) != 0) {
+            ns_set_err(err, err_sz, "%s:1: the header must be %s", path, NS_CONTROL_LOG_HEADER);
+            rc = -1;
+        }
+    }
+    while (rc == 0 && fgets(line, sizeof line, f)) {
+        lineno++;
+        if (!strchr(line, '\n') && !feof(f)) {
+            ns_set_err(err, err_sz, "%s:%ld: line too long", path, lineno);
+            rc = -1;
+            break;
+        }
+        chomp(line);
+        if (line[0] == '\0') { /* blank lines may end the file, nothing else */
+            if (blank == 0)
+                blank = lineno;
+            continue;
+        }
+        if (blank) {
+            ns_set_err(err, err_sz, "%s:%ld: blank line inside the log", path, blank);
+            rc = -1;
+            break;
+        }
+        /* Split into 7 fields. */
+        char *field[7];
+        int nf = 0;
+        char *p = line;
+        field[nf++] = p;
+        for (; *p; p++)
+            if (*p == ',') {
+                *p = '\0';
+                if (nf == 7) {
+                    nf++;
+                    break;
+                }
+                field[nf++] = p + 1;
+            }
+        if (nf != 7) {
+            ns_set_err(err, err_sz, "%s:%ld: expected 7 comma-separated fields (%s), got %s", path,
+                       lineno, NS_CONTROL_LOG_HEADER, nf > 7 ? "more" : "fewer");
+            rc = -1;
+            break;
+        }
+        double v[6];
+        for (int k = 0; k < 6 && rc == 0; k++) {
+            char *end;
+            errno = 0;
+            v[k] = strtod(field[k], &end);
+            if (field[k][0] == '\0' || *end != '\0' || errno == ERANGE || !isfinite(v[k])) {
+                ns_set_err(err, err_sz, "%s:%ld: %s must be a finite number (got '%s')", path,
+                           lineno, columns[k], field[k]);
+                rc = -1;
+            }
+        }
+        if (rc)
+            break;
+        long k = lineno - 2; /* the step */
+        if (fabs(v[0] - (double)k * dt) > 1e-3 * dt) {
+            ns_set_err(err, err_sz,
+                       "%s:%ld: t_s is %.9g but row %ld of a run stepping by dt = %g s is at "
+                       "t = %.9g s",
+                       path, lineno, v[0], k + 1, dt, (double)k * dt);
+            rc = -1;
+            break;
+        }
+        int drop = 0;
+        if (strcmp(field[6], "drop_seed") == 0)
+            drop = 1;
+        else if (field[6][0] != '\0') {
+            ns_set_err(err, err_sz, "%s:%ld: unknown event '%s' (known: drop_seed, or empty)", path,
+                       lineno, field[6]);
+            rc = -1;
+            break;
+        }
+        if (log->n == cap) {
+            cap = cap ? 2 * cap : 1024;
+            NsControl *rows = realloc(log->rows, (size_t)cap * sizeof *rows);
+            if (!rows) {
+                ns_set_err(err, err_sz, "out of memory");
+                rc = -1;
+                break;
+            }
+            log->rows = rows;
+        }
+        NsControl *c = &log->rows[log->n++];
+        c->v_insert = v[1];
+        memcpy(c->v_base, v + 2, sizeof c->v_base);
+        c->twist_rate = v[5];
+        c->drop_seed = drop;
+    }
+    if (rc == 0 && ferror(f)) {
+        ns_set_err(err, err_sz, "%s: read error", path);
+        rc = -1;
+    }
+    if (rc == 0 && log->n == 0) {
+        ns_set_err(err, err_sz, "%s:2: the control log has no rows", path);
+        rc = -1;
+    }
+    fclose(f);
+    if (rc)
+        ns_control_log_free(log);
+    return rc;
+}

@@ -1,0 +1,40 @@
+/* Trainee control logs: the controls applied at every step of a run, as CSV, written by
+ * `needlesim run --record LOG.csv` and read back by `--replay LOG.csv` (docs/scenarios.md).
+ * A session captured on any device can be converted to this format and scored later.
+ *
+ *     t_s,v_insert_m_s,base_vx_m_s,base_vy_m_s,base_vz_m_s,twist_rate_rad_s,event
+ *     0,0.02,0,0,0,0,
+ *     0.01,0.02,0,0,0,0,drop_seed
+ *
+ * Row k holds the controls applied for the step from t = k dt; numbers are written with 17
+ * significant digits, so a replay applies exactly the recorded values. */
+#ifndef NS_CONTROL_LOG_H
+#define NS_CONTROL_LOG_H
+
+#include <stdio.h>
+
+#define NS_CONTROL_LOG_HEADER                                                                      \
+    "t_s,v_insert_m_s,base_vx_m_s,base_vy_m_s,base_vz_m_s,twist_rate_rad_s,event"
+
+typedef struct NsControl {
+    double v_insert;   /* [m/s], negative retracts */
+    double v_base[3];  /* sleeve velocity [m/s] */
+    double twist_rate; /* [rad/s] */
+    int drop_seed;     /* event: release a seed at the tip before the step */
+} NsControl;
+
+typedef struct NsControlLog {
+    NsControl *rows;
+    long n;
+} NsControlLog;
+
+/* Reads a log for a scenario stepping by dt: the header above, then one row per step whose t
+ * is k dt (within dt / 1000), finite numbers, the event empty or "drop_seed". Returns 0, or -1
+ * with "path:line: ..." in err. */
+int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz);
+void ns_control_log_free(NsControlLog *log);
+
+void ns_control_log_write_header(FILE *f);
+void ns_control_log_write_row(FILE *f, double t, const NsControl *c);
+
+#endif
