@@ -39,10 +39,13 @@
 
 static const char run_usage[] =
     "usage: needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]\n"
-    "                     [--record LOG.csv | --replay LOG.csv] [--no-render] [--quiet]\n";
+    "                     [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv]\n"
+    "                     [--no-render] [--quiet]\n";
 
 typedef struct RunOpts {
     const char *scenario, *out_dir, *record, *replay;
+    const char *sets[32]; /* --set KEY=VALUE */
+    int nsets;
     long steps; /* 0: the scenario decides */
     int threads;
     int solver; /* NsCoupledSolverKind */
@@ -456,8 +459,12 @@ static int tick_body(lua_State *L)
     lua_pushstring(L, "targets"); /* a fresh table every step */
     lua_newtable(L);
     for (int i = 0; i < r->spec.target_count; i++) {
+        /* A copy of the hint: the search the score makes at the end must not depend on
+         * whether a script looked at the targets (a replay does not), or the score could
+         * differ in its last bits between a run and its replay. */
         double x[3];
-        if (world_of(&r->tissue.mesh, r->spec.targets[i].at, &r->target_hint[i], x) != 0)
+        int hint = r->target_hint[i];
+        if (world_of(&r->tissue.mesh, r->spec.targets[i].at, &hint, x) != 0)
             return luaL_error(L, "needlesim: target '%s' could not be located in the tissue",
                               r->spec.targets[i].name);
         set_vec(L, lua_gettop(L), r->spec.targets[i].name, x);
@@ -1156,7 +1163,8 @@ static int run_loop(Run *r, char *err, int err_sz)
                        1e3 * depth_of(r),
                        outside ? "the needle tip left the tissue other than back through its "
                                  "entry (exits through the far side are not modelled yet)"
-                               : "the coupled solve did not produce a valid state",
+                       : r->c.error[0] ? r->c.error
+                                       : "the coupled step did not produce a valid state",
                        st.nan_count, st.inverted, st.unconverged);
             return -1;
         }
@@ -1252,13 +1260,21 @@ static int parse_args(int argc, char **argv, RunOpts *o)
             return 1;
         } else if (strcmp(a, "-o") == 0 || strcmp(a, "--steps") == 0 ||
                    strcmp(a, "--threads") == 0 || strcmp(a, "--solver") == 0 ||
-                   strcmp(a, "--record") == 0 || strcmp(a, "--replay") == 0) {
+                   strcmp(a, "--record") == 0 || strcmp(a, "--replay") == 0 ||
+                   strcmp(a, "--set") == 0) {
             if (!v)
                 return usage_error("%s needs a value", a);
             i++;
             char *end;
             if (strcmp(a, "-o") == 0) {
                 o->out_dir = v;
+            } else if (strcmp(a, "--set") == 0) {
+                const char *eq = strchr(v, '=');
+                if (!eq || eq == v)
+                    return usage_error("--set '%s': expected KEY=VALUE", v);
+                if (o->nsets == 32)
+                    return usage_error("%s", "at most 32 --set values");
+                o->sets[o->nsets++] = v;
             } else if (strcmp(a, "--record") == 0) {
                 o->record = v;
             } else if (strcmp(a, "--replay") == 0) {
@@ -1281,8 +1297,7 @@ static int parse_args(int argc, char **argv, RunOpts *o)
         } else if (strcmp(a, "--quiet") == 0) {
             o->quiet = true;
         } else if (strcmp(a, "--frames") == 0 || strcmp(a, "--video") == 0 ||
-                   strcmp(a, "--set") == 0 || strcmp(a, "--width") == 0 ||
-                   strcmp(a, "--height") == 0) {
+                   strcmp(a, "--width") == 0 || strcmp(a, "--height") == 0) {
             fprintf(stderr, "needlesim run: %s is not available in this version yet\n", a);
             return 2;
         } else if (a[0] == '-' && a[1] != '\0') {
@@ -1310,7 +1325,8 @@ int ns_cmd_run(int argc, char **argv)
         return pa == 1 ? 0 : pa;
     char err[1024] = "";
     int rc = prepare_outputs(&r, err, sizeof err) ? -2 : -1;
-    if (rc == -1 && ns_scenario_load(r.opt.scenario, &r.sc, err, sizeof err) == 0) {
+    if (rc == -1 && ns_scenario_load_set(r.opt.scenario, r.opt.sets, r.opt.nsets, &r.sc, err,
+                                         sizeof err) == 0) {
         r.have_sc = true;
         if (ns_run_spec_read(&r.sc, &r.spec, err, sizeof err) == 0) {
             r.have_spec = true;

@@ -909,6 +909,58 @@ static int build_tissue(Builder *b, int si)
 
 int ns_scenario_load(const char *path, NsScenario *sc, char *err, int err_sz)
 {
+    return ns_scenario_load_set(path, NULL, 0, sc, err, err_sz);
+}
+
+/* The --set values as the global table __ns_sets (KEY -> VALUE string) that ns.param reads,
+ * before the scenario runs; afterwards every key must have been read by an ns.param call. */
+static void push_sets(lua_State *L, const char *const *sets, int nsets)
+{
+    lua_newtable(L);
+    for (int i = 0; i < nsets; i++) {
+        const char *eq = strchr(sets[i], '=');
+        lua_pushlstring(L, sets[i], (size_t)(eq - sets[i]));
+        lua_pushstring(L, eq + 1);
+        lua_rawset(L, -3);
+    }
+    lua_setglobal(L, "__ns_sets");
+    lua_newtable(L);
+    lua_setglobal(L, "__ns_params");
+}
+
+static int check_sets(Builder *b, const char *const *sets, int nsets)
+{
+    lua_State *L = b->L;
+    int rc = 0;
+    lua_getglobal(L, "__ns_params"); /* KEY -> true for every ns.param the scenario called */
+    for (int i = 0; i < nsets && rc == 0; i++) {
+        const char *eq = strchr(sets[i], '=');
+        lua_pushlstring(L, sets[i], (size_t)(eq - sets[i]));
+        int used = lua_istable(L, -2) && lua_rawget(L, -2) != LUA_TNIL;
+        lua_pop(L, 1);
+        if (!used) {
+            char known[512] = "";
+            if (lua_istable(L, -1)) {
+                lua_pushnil(L);
+                while (lua_next(L, -2)) {
+                    lua_pop(L, 1);
+                    if (lua_type(L, -1) == LUA_TSTRING)
+                        snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s",
+                                 known[0] ? ", " : "", lua_tostring(L, -1));
+                }
+            }
+            rc = fail(b, "%s: --set %.*s: the scenario has no parameter '%.*s' (%s%s)",
+                      b->sc->path, (int)(eq - sets[i]), sets[i], (int)(eq - sets[i]), sets[i],
+                      known[0] ? "its parameters: " : "it reads none with ns.param", known);
+        }
+    }
+    lua_pop(L, 1);
+    return rc;
+}
+
+int ns_scenario_load_set(const char *path, const char *const *sets, int nsets, NsScenario *sc,
+                         char *err, int err_sz)
+{
     double t0 = now_ms();
     memset(sc, 0, sizeof *sc);
     ns_mesh_init(&sc->mesh);
@@ -926,6 +978,7 @@ int ns_scenario_load(const char *path, NsScenario *sc, char *err, int err_sz)
     }
     lua_State *L = ns_lua_state(sc->lua);
     b.L = L;
+    push_sets(L, sets, nsets);
     if (ns_lua_run_scenario(sc->lua, path, err, err_sz) != 0) {
         ns_scenario_free(sc);
         return -1;
@@ -945,6 +998,8 @@ int ns_scenario_load(const char *path, NsScenario *sc, char *err, int err_sz)
     }
     if (rc == 0)
         rc = get_string(&b, si, "description", sc->where, "ns.scenario", false, &sc->description);
+    if (rc == 0)
+        rc = check_sets(&b, sets, nsets);
     if (rc == 0)
         rc = build_tissue(&b, si);
 

@@ -77,6 +77,10 @@ typedef struct NsScenario {
 /* Runs the scenario file and builds its tissue. On failure sc is left freed (safe to pass to
  * ns_scenario_free again) and err holds one line. Returns 0 or -1. */
 int ns_scenario_load(const char *path, NsScenario *sc, char *err, int err_sz);
+/* The same with `needlesim run --set KEY=VALUE` values (each string holds a '='): the scenario
+ * reads them with ns.param(KEY, default); a KEY it never reads is an error. */
+int ns_scenario_load_set(const char *path, const char *const *sets, int nsets, NsScenario *sc,
+                         char *err, int err_sz);
 void ns_scenario_free(NsScenario *sc);
 
 /* Region names as an array for ns_mesh_write_msh (valid while sc lives). Caller frees the

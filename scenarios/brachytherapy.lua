@@ -67,7 +67,8 @@ return ns.scenario {
   name = "prostate brachytherapy",
   description = "Transperineal insertion into a synthetic male pelvis (paper Fig. 1).",
   dt = 0.01,
-  needle = ns.needle { kind = "flexible", bevel_deg = 30 },
+  -- `needlesim run ... --set needle.kind=stiff` runs the stiff symmetric needle (ProsSS).
+  needle = ns.needle { kind = ns.param("needle.kind", "flexible"), bevel_deg = 30 },
   entry = { point = { hole[1], hole[2], 0 }, direction = { 0, 0, 1 } },
   targets = {
     { name = "base seed", at = { hole[1], hole[2], seed_depths[1] }, tolerance = 3e-3 },

@@ -790,6 +790,45 @@ function ns.tissue.file(t)
     return new(TISSUE, tissue)
 end
 
+-- Parameters -------------------------------------------------------------------------------
+
+--- ns.param(key, default): a scenario parameter that `needlesim run --set key=value` can change.
+-- The value takes the type of `default` (a number, a boolean or a string); without --set it is
+-- `default`. A --set key that no ns.param call reads is an error, so a misspelt key is caught.
+function ns.param(key, default)
+    local where = where_of(2)
+    if type(key) ~= "string" or key == "" then
+        raise(where, "ns.param", fmt("key must be a non-empty string (got %s)", describe(key)))
+    end
+    local td = type(default)
+    if td ~= "number" and td ~= "boolean" and td ~= "string" then
+        raise(where, "ns.param", fmt("default must be a number, a boolean or a string (got %s)",
+            describe(default)))
+    end
+    local params = rawget(_G, "__ns_params")
+    if type(params) == "table" then
+        params[key] = true
+    end
+    local sets = rawget(_G, "__ns_sets")
+    local v = type(sets) == "table" and sets[key] or nil
+    if v == nil then
+        return default
+    end
+    if td == "number" then
+        local x = tonumber(v)
+        if not is_finite(x) then
+            raise(where, "ns.param", fmt("--set %s=%s: expected a number", key, v))
+        end
+        return x
+    elseif td == "boolean" then
+        if v ~= "true" and v ~= "false" then
+            raise(where, "ns.param", fmt("--set %s=%s: expected true or false", key, v))
+        end
+        return v == "true"
+    end
+    return v
+end
+
 -- Needle -----------------------------------------------------------------------------------
 
 local NEEDLE_FIELDS = { "kind", "diameter", "inner_diameter", "youngs", "density", "tip",

@@ -520,6 +520,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     char err[256];
     int rc = ns_remesh_tip(M, &c->remesh, &tip, u_new, &res, err, sizeof err);
     if (rc != 0) {
+        snprintf(c->error, sizeof c->error, "%s", err);
         /* Scoring may have grown the mesh's slots even though nothing was accepted: the
          * tissue's arrays must follow before it is touched again. */
         char err2[256];
@@ -589,8 +590,12 @@ static int reparameterize(NsCoupled *c, NsCouplingStats *st)
         /* Outside the tissue: nothing is coupled. A withdrawn needle pushed back in would pass
          * through the tissue unseen: re-entry is not handled yet, so it is an error. */
         if (c->outside &&
-            ns_mesh_locate_in(M, M->x, r->x + 3 * (n - 1), c->remesh_hint, 1e-9, NULL) >= 0)
+            ns_mesh_locate_in(M, M->x, r->x + 3 * (n - 1), c->remesh_hint, 1e-9, NULL) >= 0) {
+            snprintf(c->error, sizeof c->error,
+                     "the needle went back into the tissue after leaving it (re-entry is not "
+                     "modelled yet)");
             return -1;
+        }
         return 0;
     }
     /* The tip's cut (or retreat): its slide along its tangent, mapped into material length on
@@ -878,13 +883,17 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     memset(&rs, 0, sizeof rs);
     NsRodSystem sys;
     double *bev_t, *bev_r;
+    c->error[0] = '\0';
     if (bevel_force(c, ext_tissue, ext_rod, &st.bevel_force, &bev_t, &bev_r)) {
+        snprintf(c->error, sizeof c->error, "the bevel force could not be applied");
         if (stats)
             *stats = st;
         return -1;
     }
     double tn = now_ms();
     if (ns_rod_begin_step(r, dt, bev_r ? bev_r : ext_rod, &sys, &rs)) {
+        snprintf(c->error, sizeof c->error, "the needle's forces or Jacobians failed (NaN %d)",
+                 rs.nan_count);
         free(bev_t);
         free(bev_r);
         st.nan_count = rs.nan_count;
@@ -928,6 +937,7 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     int *iw = malloc((size_t)(3 * q + 1) * sizeof *iw);
     uint8_t *sw = malloc((size_t)q + 1);
     if (!w || !iw || !sw) {
+        snprintf(c->error, sizeof c->error, "out of memory");
         free(iw);
         free(sw);
         ns_rod_abort_step(r);
@@ -1022,6 +1032,9 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         finite = isfinite(S.ar[i]);
     st.lcp_ms = now_ms() - tl;
     if (!finite) {
+        snprintf(c->error, sizeof c->error, "%s",
+                 rc == 0 ? "the coupled solve gave non-finite accelerations"
+                         : "the coupled solve failed (its linear solves did not complete)");
         st.nan_count += rc == 0;
         ns_rod_abort_step(r);
         free(iw);
@@ -1045,6 +1058,8 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     free(sw);
     double tr = now_ms();
     if (reparameterize(c, &st)) {
+        if (!c->error[0])
+            snprintf(c->error, sizeof c->error, "the needle's reparameterization failed");
         st.total_ms = now_ms() - t0;
         if (stats)
             *stats = st;

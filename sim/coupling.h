@@ -150,6 +150,7 @@ typedef struct NsCoupled {
     int path_cap;               /* entries allocated in path.node and path.s */
     int outside;                /* params.remesh: the needle was withdrawn out of the tissue */
     uint64_t steps;
+    char error[256]; /* why the last failed ns_coupled_step failed ("" after a good step) */
 } NsCoupled;
 
 /* Couples rod to tissue along path: the rod's nodes from node `first` on must sit at the path's

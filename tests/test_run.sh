@@ -203,6 +203,19 @@ bad_running error_table 's/act.wait { time = 0.2 }/act.wait { time = 0.2 }; erro
 bad_running too_deep 's/depth = 0.03 }/depth = 0.3 }/' \
     "too_deep.lua(:[0-9]+: act.insert: the needle does not advance|: step [0-9]+ .*failed)"
 
+# --set: a key the scenario does not read is an error naming the file and the key.
+"$BIN" run "$TUT" --set needle.kynd=stiff -o "$TMP/o_set" --quiet >/dev/null 2>"$TMP/err_set"
+rc=$?
+if [ $rc = 1 ] && grep -q "tutorial.lua: --set needle.kynd: the scenario has no parameter" "$TMP/err_set" &&
+    [ ! -e "$TMP/o_set/report.json" ]; then
+    pass "--set with a key the scenario does not read: exit 1"
+else
+    fail "--set unknown key" "exit $rc: $(head -1 "$TMP/err_set")"
+fi
+"$BIN" run "$TUT" --set oops -o "$TMP/o_set2" --quiet >/dev/null 2>"$TMP/err_set2"
+rc=$?
+if [ $rc = 2 ] && grep -q "expected KEY=VALUE" "$TMP/err_set2"; then pass "--set without '=': exit 2"; else fail "--set without =" "exit $rc"; fi
+
 touch "$TMP/a_file"
 "$BIN" run "$TUT" -o "$TMP/a_file/out" --quiet >/dev/null 2>"$TMP/err_dir"
 rc=$?

@@ -58,6 +58,8 @@ end
 -- An insertion or retraction whose depth has not moved by 0.01 mm for this long [s] of
 -- simulated time is stuck: the action fails instead of waiting for ever.
 local STALL_TIME = 2
+-- How far outside the entry point a full retraction takes the tip [m].
+local CLEAR = 2e-3
 
 local function GT0(x) return x > 0 end
 local function GE0(x) return x >= 0 end
@@ -103,21 +105,25 @@ function act.insert(t)
 end
 
 --- act.retract{speed, depth}: pull the needle back at `speed` [m/s] until its tip is `depth`
--- [m] past the entry point (default 0: out of the tissue).
+-- [m] past the entry point. Without `depth` the needle comes all the way out, and on until its
+-- tip is CLEAR (2 mm) outside the entry point, so the skin settling back does not meet it
+-- (re-entry is not modelled).
 function act.retract(t)
     running()
     fields(t, "retract", { "speed", "depth" })
     local speed = number(t, "retract", "speed", GT0, "> 0 [m/s]")
-    local depth = number(t, "retract", "depth", GE0, ">= 0 [m]", 0)
+    local depth = number(t, "retract", "depth", GE0, ">= 0 [m]", -1)
+    local out = depth < 0
     local best, since = sim.depth, sim.t
-    while sim.depth > depth and not sim.exited do
+    while (out and (not sim.exited or sim.depth > -CLEAR)) or (not out and sim.depth > depth
+        and not sim.exited) do
         sim.control.v_insert = -speed
         tick()
         if sim.depth < best - 1e-5 then
             best, since = sim.depth, sim.t
         elseif sim.t - since > STALL_TIME then
             error(fmt("act.retract: the needle does not come back: depth %.1f mm for %g s, %.1f "
-                .. "mm wanted", 1e3 * sim.depth, STALL_TIME, 1e3 * depth), 2)
+                .. "mm wanted", 1e3 * sim.depth, STALL_TIME, 1e3 * (out and -CLEAR or depth)), 2)
         end
     end
     stop()
