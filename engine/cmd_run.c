@@ -262,7 +262,9 @@ static int build(Run *r, char *err, int err_sz)
         rp.tip = NS_TIP_BEVEL;
         rp.bevel_angle = sp->bevel_deg * M_PI / 180.0;
     }
-    /* The material frame's d1: the axis least aligned with the needle, made normal to it. */
+    /* The material frame's d1: the axis least aligned with the needle, made normal to it; or,
+     * with entry.bevel_toward b, d1 = b x t, so that m2 = t x d1 = b is where the bevel
+     * steers (sim/rod.h: m2 = t x m1). */
     int ax = fabs(d[0]) <= fabs(d[1]) && fabs(d[0]) <= fabs(d[2]) ? 0
              : fabs(d[1]) <= fabs(d[2])                           ? 1
                                                                   : 2;
@@ -271,6 +273,12 @@ static int build(Run *r, char *err, int err_sz)
     double dd = dot3(d1, d);
     for (int k = 0; k < 3; k++)
         d1[k] -= dd * d[k];
+    if (sp->has_bevel_toward) {
+        const double *b = sp->bevel_toward;
+        d1[0] = b[1] * d[2] - b[2] * d[1];
+        d1[1] = b[2] * d[0] - b[0] * d[2];
+        d1[2] = b[0] * d[1] - b[1] * d[0];
+    }
     double n1 = sqrt(dot3(d1, d1));
     for (int k = 0; k < 3; k++)
         d1[k] /= n1;

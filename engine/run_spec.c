@@ -188,6 +188,11 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     if (lua_getfield(L, si, "entry") == LUA_TTABLE) {
         vec_field(L, lua_gettop(L), "point", spec->entry_point);
         vec_field(L, lua_gettop(L), "direction", spec->entry_dir);
+        lua_getfield(L, lua_gettop(L), "bevel_toward");
+        spec->has_bevel_toward = lua_istable(L, -1);
+        lua_pop(L, 1);
+        if (spec->has_bevel_toward)
+            vec_field(L, lua_gettop(L), "bevel_toward", spec->bevel_toward);
     } else {
         ns_set_err(err, err_sz,
                    "%s: ns.scenario: missing field 'entry' ({point = {x, y, z}, direction = "

@@ -35,6 +35,8 @@ typedef struct NsRunSpec {
     double bevel_deg;
     /* entry = {point, direction} (direction of unit length) */
     double entry_point[3], entry_dir[3];
+    bool has_bevel_toward;
+    double bevel_toward[3]; /* unit, normal to entry_dir: where a bevel tip steers at first */
     NsRunTarget *targets;
     int target_count;
     NsRunMarker *markers;

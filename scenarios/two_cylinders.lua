@@ -1,7 +1,8 @@
 -- Two-cylinder steering (the paper's Fig. 8): a block of gel with two rigid cylindrical
--- obstacles across it. A bevel-tip needle inserted along +x from the middle of the x = 0 face
--- meets the first rod almost head on and has to be steered above it, then twisted to bend
--- back down under the second one (later versions add the needle, targets and the script).
+-- obstacles across it and a goal beyond them. A bevel-tip needle enters the x = 0 face 1 cm
+-- off centre (y = 4 cm, beside the near rod), its bevel steering it towards +y: it curves up
+-- past the far rod, which a straight needle would hit, and half a turn of the base at 6.5 cm
+-- levels it off towards the goal. Each rod entered costs 25 points.
 --
 -- What it teaches:
 --   * ns.tissue.shapes: several regions meshed into one conforming mesh;
@@ -11,10 +12,12 @@
 --   * CSG: each rod is a long cylinder intersected with the block, so it ends flush with the
 --     block's faces instead of sticking out of it;
 --   * bounds: the lattice is anchored at the block's corner, so its faces stay flat.
+--   * obstacles (the rods' regions), entry.bevel_toward, and steering by act.twist.
 --
 -- The paper's mesh had 3,248 tets and 813 nodes; this one is of the same size
 -- (`needlesim check scenarios/two_cylinders.lua`).
 local ns = require "needlesim"
+local act = require "needlesim.actions"
 
 local L, W, H = 0.10, 0.06, 0.04 -- block size along x (insertion), y, z [m]
 local R = 0.006 -- rod radius [m]
@@ -43,4 +46,19 @@ return ns.scenario {
                 fixed = true },
         },
     },
+    dt = 0.01,
+    needle = ns.needle { kind = "flexible", bevel_deg = 30 },
+    -- On the lattice line y = 4 cm, z = 2 cm, the bevel steering towards +y at first.
+    entry = { point = { 0, 0.04, 0.02 }, direction = { 1, 0, 0 }, bevel_toward = { 0, 1, 0 } },
+    targets = { { name = "goal", at = { 0.09, 0.054, 0.02 }, tolerance = 3e-3 } },
+    obstacles = {
+        { name = "near rod", region = "near rod" },
+        { name = "far rod", region = "far rod" },
+    },
+    script = function()
+        -- Up past the far rod, then half a turn to level off towards the goal.
+        act.insert { speed = 0.01, depth = 0.065 }
+        act.twist { angle = math.pi }
+        act.insert { speed = 0.01, depth = 0.09 }
+    end,
 }

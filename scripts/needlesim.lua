@@ -876,7 +876,7 @@ local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "durati
 -- Accepted now and checked by the stages that use them (later versions).
 local RESERVED = { "camera", "accuracy", "solver" }
 
-local ENTRY_FIELDS = { "point", "direction" }
+local ENTRY_FIELDS = { "point", "direction", "bevel_toward" }
 local TARGET_FIELDS = { "name", "at", "tolerance" }
 local MARKER_FIELDS = { "name", "at" }
 local OBSTACLE_FIELDS = { "name", "region" }
@@ -919,6 +919,16 @@ local function entry_of(v, where)
         a:fail("direction must not be zero")
     end
     e.direction = { d[1] / len, d[2] / len, d[3] / len }
+    local b = a:vec3("bevel_toward", ANY, "", OPTIONAL)
+    if b then
+        local bd = b[1] * e.direction[1] + b[2] * e.direction[2] + b[3] * e.direction[3]
+        local p = { b[1] - bd * e.direction[1], b[2] - bd * e.direction[2], b[3] - bd * e.direction[3] }
+        local lp = math.sqrt(p[1] * p[1] + p[2] * p[2] + p[3] * p[3])
+        if lp < 1e-9 * math.sqrt(b[1] * b[1] + b[2] * b[2] + b[3] * b[3]) or lp == 0 then
+            a:fail("bevel_toward must not be parallel to direction")
+        end
+        e.bevel_toward = { p[1] / lp, p[2] / lp, p[3] / lp }
+    end
     return e
 end
 

@@ -159,20 +159,18 @@ fi
 
 expect_error "no command: usage, exit 2" 2 "usage:" --
 expect_error "unknown command: exit 2" 2 "unknown command 'frobnicate'" -- frobnicate
-expect_error "run: a scenario without an entry, exit 1" 1 "phantom.lua:" \
-    "ns.scenario: missing field 'entry'" -- run scenarios/phantom.lua -o "$TMP/run_phantom"
 expect_error "bench not built yet: exit 2" 2 "'bench' is not available" -- bench x.lua
 expect_error "check: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
-    check scenarios/phantom.lua --bogus
+    check scenarios/phantom_single_bend.lua --bogus
 expect_error "check: no scenario, exit 2" 2 "missing SCENARIO.lua" -- check --json
 expect_error "check: two scenarios, exit 2" 2 "unexpected argument" -- \
-    check scenarios/phantom.lua scenarios/two_cylinders.lua
+    check scenarios/phantom_single_bend.lua scenarios/two_cylinders.lua
 expect_error "check: --mesh-out with unknown extension, exit 2" 2 "use .vtu or .msh" -- \
-    check scenarios/phantom.lua --mesh-out "$TMP/mesh.obj"
+    check scenarios/phantom_single_bend.lua --mesh-out "$TMP/mesh.obj"
 
 # ---- the shipped scenarios -----------------------------------------------------------------
 
-for sc in brachytherapy two_cylinders phantom tutorial; do
+for sc in brachytherapy two_cylinders phantom_single_bend phantom_double_bend tutorial; do
     run check "scenarios/$sc.lua" --json
     if [ "$RC" != 0 ]; then
         fail "check $sc --json" "exit $RC"
@@ -219,7 +217,7 @@ else
     fail "two_cylinders has fixed rods" "no fixed region or no fixed nodes"
 fi
 # phantom: the held faces give fixed nodes.
-if [ "$(json_value "$TMP/phantom.json" fixed_nodes)" -gt 0 ]; then
+if [ "$(json_value "$TMP/phantom_single_bend.json" fixed_nodes)" -gt 0 ]; then
     pass "phantom has fixed faces"
 else
     fail "phantom has fixed faces" "no fixed nodes"

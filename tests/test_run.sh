@@ -7,16 +7,32 @@
 #
 # With `brachytherapy` as third argument it runs the brachytherapy scenario instead (a separate
 # meson test, not in the sanitizer build): it succeeds, every report field is finite, both seeds
-# are released, the shipped script hits at least one target, and no obstacle is entered.
+# are released, the shipped script hits at least one target, and no obstacle is entered; and
+# its recorded log replays to the same state. With `scenarios`, every other shipped scenario
+# runs with a finite report.
 #
-# usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR [brachytherapy]
+# usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR [tutorial|brachytherapy|scenarios]
 set -u
 
-BIN=${1:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR [brachytherapy]}
-SRC=${2:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR [brachytherapy]}
+BIN=${1:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR [PART]}
+SRC=${2:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR [PART]}
 PART=${3:-tutorial}
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-run.XXXXXX") || exit 1
 trap 'rm -rf "$TMP"' EXIT
+# finite(value, path): every number in a report is finite (JSON null is a non-finite number).
+cat >"$TMP/finite.py" <<'PY'
+import math
+def finite(v, path):
+    if isinstance(v, (bool, str)):
+        return
+    assert v is not None, "null at " + path
+    if isinstance(v, (int, float)):
+        assert math.isfinite(v), "non-finite at " + path
+    elif isinstance(v, list):
+        [finite(x, "%s[%d]" % (path, i)) for i, x in enumerate(v)]
+    elif isinstance(v, dict):
+        [finite(x, path + "." + k) for k, x in v.items()]
+PY
 PASSED=0
 FAILED=0
 pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
@@ -28,19 +44,10 @@ if [ "$PART" = brachytherapy ]; then
 rc=$?
 cat "$TMP/out"
 if [ $rc = 0 ]; then pass "brachytherapy runs"; else fail "brachytherapy runs" "exit $rc: $(tail -2 "$TMP/err")"; fi
-python3 - "$TMP/b/report.json" <<'PY' >"$TMP/py" 2>&1
+python3 - "$TMP/b/report.json" "$TMP/finite.py" <<'PY' >"$TMP/py" 2>&1
 import json, math, sys
 r = json.load(open(sys.argv[1]))
-def finite(v, path):
-    if isinstance(v, (bool, str)):
-        return
-    assert v is not None, "null at " + path
-    if isinstance(v, (int, float)):
-        assert math.isfinite(v), "non-finite at " + path
-    elif isinstance(v, list):
-        [finite(x, "%s[%d]" % (path, i)) for i, x in enumerate(v)]
-    elif isinstance(v, dict):
-        [finite(x, path + "." + k) for k, x in v.items()]
+exec(open(sys.argv[2]).read())
 finite(r, "report")
 assert len(r["seeds"]) == 2 == r["seeds_planned"], r["seeds"]
 hits = [t["name"] for t in r["targets"] if t["hit"]]
@@ -63,6 +70,29 @@ if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "--record then --replay: same state
     exit
 fi
 
+# Every other shipped scenario runs and writes a report whose fields are all finite.
+if [ "$PART" = scenarios ]; then
+    for sc in tutorial two_cylinders phantom_single_bend phantom_double_bend; do
+        "$BIN" run "$SRC/scenarios/$sc.lua" --no-render -o "$TMP/$sc" --quiet >/dev/null 2>"$TMP/err_$sc"
+        rc=$?
+        if [ $rc = 0 ] && python3 - "$TMP/$sc/report.json" "$TMP/finite.py" <<'PY' >"$TMP/py_$sc" 2>&1; then
+import json, math, sys
+r = json.load(open(sys.argv[1]))
+exec(open(sys.argv[2]).read())
+finite(r, "report")
+assert r["steps"] > 0 and r["script_finished"]
+print("%d steps, score %.1f" % (r["steps"], r["score"]["total"]))
+PY
+            pass "$sc runs, report finite ($(cat "$TMP/py_$sc"))"
+        else
+            fail "$sc" "exit $rc: $(head -1 "$TMP/err_$sc") $(tail -1 "$TMP/py_$sc" 2>/dev/null)"
+        fi
+    done
+    echo "$PASSED passed, $FAILED failed"
+    [ "$FAILED" = 0 ]
+    exit
+fi
+
 TUT="$SRC/scenarios/tutorial.lua"
 
 # The tutorial, one thread, then two.
@@ -77,7 +107,7 @@ fi
 if ls -A "$TMP/t1" | grep -q '\.part$'; then fail "no temporary files left" "$(ls -A "$TMP/t1")"; else pass "no temporary files left"; fi
 
 # The report: every contract key present, every number finite, the target hit.
-python3 - "$TMP/t1/report.json" "$TMP/t1/trajectory.csv" <<'PY' >"$TMP/py" 2>&1
+python3 - "$TMP/t1/report.json" "$TMP/t1/trajectory.csv" "$TMP/finite.py" <<'PY' >"$TMP/py" 2>&1
 import json, math, sys
 r = json.load(open(sys.argv[1]))
 need = {
@@ -95,19 +125,7 @@ for sub, keys in need.items():
     obj = r[sub] if sub else r
     for k in keys:
         assert k in obj, "missing key %s%s" % (sub + "." if sub else "", k)
-def finite(v, path):
-    if isinstance(v, bool) or isinstance(v, str):
-        return
-    if v is None:
-        raise AssertionError("null (non-finite) at " + path)
-    if isinstance(v, (int, float)):
-        assert math.isfinite(v), "non-finite at " + path
-    elif isinstance(v, list):
-        for i, x in enumerate(v):
-            finite(x, "%s[%d]" % (path, i))
-    elif isinstance(v, dict):
-        for k, x in v.items():
-            finite(x, path + "." + k)
+exec(open(sys.argv[3]).read())
 finite(r, "report")
 assert r["steps"] > 0
 assert len(r["targets"]) == 1 and r["targets"][0]["hit"] is True, r["targets"]
