@@ -159,6 +159,7 @@ typedef struct Run {
     FILE *rec;
     NsControlLog replay;
     bool made_dir, progress_shown, script_finished;
+    bool stop_when_done; /* bench: the script's end ends the run even before --steps */
     FILE *traj;
 } Run;
 
@@ -1153,7 +1154,7 @@ static int run_loop(Run *r, char *err, int err_sz)
         if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
             r->insertions++;
         r->prev_v = r->rod.v_insert;
-        if (max_steps == 0 && !more)
+        if ((max_steps == 0 || r->stop_when_done) && !more)
             break;
         NsCouplingStats st;
         double w0 = now_s();
@@ -1198,16 +1199,18 @@ static int run_loop(Run *r, char *err, int err_sz)
             return -1;
         }
         const double *tip = tip_of(r);
-        fprintf(r->traj, "%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%d,%d",
-                (double)r->steps * sp->dt, tip[0], tip[1], tip[2], depth_of(r), st.axial_force,
-                r->rod.v_insert, r->rod.twist_rate, st.n_static, st.n_dyn_pos, st.n_dyn_neg,
-                st.cutting);
-        for (int i = 0; i < sp->marker_count; i++) {
+        if (r->traj)
+            fprintf(r->traj, "%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%d,%d",
+                    (double)r->steps * sp->dt, tip[0], tip[1], tip[2], depth_of(r), st.axial_force,
+                    r->rod.v_insert, r->rod.twist_rate, st.n_static, st.n_dyn_pos, st.n_dyn_neg,
+                    st.cutting);
+        for (int i = 0; r->traj && i < sp->marker_count; i++) {
             double x[3] = {NAN, NAN, NAN};
             world_of(&r->tissue.mesh, sp->markers[i].at, &r->marker_hint[i], x);
             fprintf(r->traj, ",%.9g,%.9g,%.9g", x[0], x[1], x[2]);
         }
-        fputc('\n', r->traj);
+        if (r->traj)
+            fputc('\n', r->traj);
         check_obstacles(r, (double)r->steps * sp->dt, exited);
         if (tty && (r->steps % 10 == 0)) {
             progress(r, max_steps, (double)r->steps * sp->dt);
@@ -1447,4 +1450,175 @@ int ns_cmd_run(int argc, char **argv)
     results_free(&res);
     run_free(&r);
     return rc ? 1 : 0;
+}
+
+/* ---- needlesim bench ---- */
+
+static const char bench_usage[] =
+    "usage: needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N]\n"
+    "                       [--set KEY=VALUE]... [--json]\n";
+
+static void bench_stats_json(NsJson *j, const Run *r)
+{
+    ns_json_key(j, "step_ms");
+    ns_json_begin_object(j);
+    ns_json_key(j, "median");
+    ns_json_number(j, series_quantile(&r->step_ms, 0.5));
+    ns_json_key(j, "p95");
+    ns_json_number(j, series_quantile(&r->step_ms, 0.95));
+    ns_json_key(j, "max");
+    ns_json_number(j, series_quantile(&r->step_ms, 1.0));
+    ns_json_end_object(j);
+    ns_json_key(j, "stages_ms");
+    ns_json_begin_object(j);
+    const Series *st[5] = {&r->total_ms, &r->lcp_ms, &r->tissue_ms, &r->needle_ms, &r->remesh_ms};
+    static const char *const stn[5] = {"total", "lcp", "tissue", "needle", "remesh"};
+    for (int k = 0; k < 5; k++) {
+        ns_json_key(j, stn[k]);
+        ns_json_number(j, series_quantile(st[k], 0.5));
+    }
+    ns_json_end_object(j);
+    stats_object(j, "lcp_trials", &r->trials);
+    stats_object(j, "cg_iterations", &r->iterations);
+}
+
+/* needlesim bench SCENARIO.lua: the scenario's script for --steps steps (default 200, fewer if
+ * the script ends first), nothing written; the per-stage medians in the form of the paper's
+ * Table 2 (Total, LCP, Tissue, Needle, Remesh) and the LCP trials and CG iterations of its
+ * Table 3. Speed against the paper's solver in the same process (--compare paper) is issue 9. */
+int ns_cmd_bench(int argc, char **argv)
+{
+    Run r;
+    memset(&r, 0, sizeof r);
+    r.sim_ref = r.act_ref = r.co_ref = LUA_NOREF;
+    r.opt.threads = 1;
+    r.opt.solver = NS_COUPLED_SCHUR;
+    r.opt.quiet = true;
+    bool json = false;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
+            fputs(bench_usage, stdout);
+            return 0;
+        } else if (strcmp(a, "--json") == 0) {
+            json = true;
+        } else if (strcmp(a, "--compare") == 0) {
+            fprintf(stderr, "needlesim bench: --compare is not available in this version yet\n");
+            return 2;
+        } else if (strcmp(a, "--steps") == 0 || strcmp(a, "--threads") == 0 ||
+                   strcmp(a, "--solver") == 0 || strcmp(a, "--set") == 0) {
+            if (!v) {
+                fprintf(stderr, "needlesim bench: %s needs a value\n%s", a, bench_usage);
+                return 2;
+            }
+            i++;
+            char *end;
+            if (strcmp(a, "--solver") == 0) {
+                r.opt.solver = ns_coupled_solver_parse(v);
+                if (r.opt.solver < 0) {
+                    fprintf(stderr,
+                            "needlesim bench: --solver '%s': unknown solver (schur or "
+                            "paper)\n%s",
+                            v, bench_usage);
+                    return 2;
+                }
+            } else if (strcmp(a, "--set") == 0) {
+                if (!strchr(v, '=') || v[0] == '=' || r.opt.nsets == 32) {
+                    fprintf(stderr, "needlesim bench: --set '%s': expected KEY=VALUE\n%s", v,
+                            bench_usage);
+                    return 2;
+                }
+                r.opt.sets[r.opt.nsets++] = v;
+            } else {
+                long n = strtol(v, &end, 10);
+                if (*end || n < 1 || n > (strcmp(a, "--threads") == 0 ? 64 : 1000000)) {
+                    fprintf(stderr, "needlesim bench: %s: expected a positive integer\n%s", a,
+                            bench_usage);
+                    return 2;
+                }
+                if (strcmp(a, "--steps") == 0)
+                    r.opt.steps = n;
+                else
+                    r.opt.threads = (int)n;
+            }
+        } else if (a[0] == '-' && a[1] != '\0') {
+            fprintf(stderr, "needlesim bench: unknown option '%s'\n%s", a, bench_usage);
+            return 2;
+        } else if (!r.opt.scenario) {
+            r.opt.scenario = a;
+        } else {
+            fprintf(stderr, "needlesim bench: one scenario only (got '%s' too)\n%s", a,
+                    bench_usage);
+            return 2;
+        }
+    }
+    if (!r.opt.scenario) {
+        fprintf(stderr, "needlesim bench: missing SCENARIO.lua\n%s", bench_usage);
+        return 2;
+    }
+    if (r.opt.steps == 0)
+        r.opt.steps = 200;
+    r.stop_when_done = true;
+    char err[1024] = "";
+    int rc = -1;
+    if (ns_scenario_load_set(r.opt.scenario, r.opt.sets, r.opt.nsets, &r.sc, err, sizeof err) ==
+        0) {
+        r.have_sc = true;
+        if (ns_run_spec_read(&r.sc, &r.spec, err, sizeof err) == 0) {
+            r.have_spec = true;
+            rc = 0;
+        }
+    }
+    rc = rc ? rc : script_start(&r, err, sizeof err);
+    rc = rc ? rc : build(&r, err, sizeof err);
+    rc = rc ? rc : run_loop(&r, err, sizeof err);
+    if (rc) {
+        size_t n = strlen(r.opt.scenario);
+        bool located = strncmp(err, "needlesim", 9) == 0 || strncmp(err, r.opt.scenario, n) == 0;
+        fprintf(stderr, "%s%s\n", located ? "" : "needlesim: ", err);
+        run_free(&r);
+        return 1;
+    }
+    const char *solver = ns_coupled_solver_name((NsCoupledSolverKind)r.opt.solver);
+    if (json) {
+        NsJson j;
+        ns_json_init(&j, stdout, 1);
+        ns_json_begin_object(&j);
+        ns_json_key(&j, "scenario");
+        ns_json_string(&j, r.sc.name);
+        ns_json_key(&j, "solver");
+        ns_json_string(&j, solver);
+        ns_json_key(&j, "threads");
+        ns_json_int(&j, r.opt.threads);
+        ns_json_key(&j, "steps");
+        ns_json_int(&j, r.steps);
+        ns_json_key(&j, "tets");
+        ns_json_int(&j, r.tissue.mesh.tet_alive);
+        ns_json_key(&j, "nodes");
+        ns_json_int(&j, r.tissue.mesh.node_alive);
+        bench_stats_json(&j, &r);
+        ns_json_end_object(&j);
+        fputc('\n', stdout);
+    } else {
+        double lo, mean, hi, ilo, imean, ihi;
+        series_range(&r.trials, &lo, &mean, &hi);
+        series_range(&r.iterations, &ilo, &imean, &ihi);
+        printf("%s: %d tets, %d nodes; solver %s, %d thread(s), %ld steps of %g ms\n", r.sc.name,
+               r.tissue.mesh.tet_alive, r.tissue.mesh.node_alive, solver, r.opt.threads, r.steps,
+               1e3 * r.spec.dt);
+        printf("median ms per step (the paper's Table 2):\n");
+        printf("  %8s %8s %8s %8s %8s\n", "Total", "LCP", "Tissue", "Needle", "Remesh");
+        printf("  %8.2f %8.2f %8.2f %8.2f %8.2f\n", series_quantile(&r.total_ms, 0.5),
+               series_quantile(&r.lcp_ms, 0.5), series_quantile(&r.tissue_ms, 0.5),
+               series_quantile(&r.needle_ms, 0.5), series_quantile(&r.remesh_ms, 0.5));
+        printf("step wall time: median %.2f ms, p95 %.2f ms, max %.2f ms\n",
+               series_quantile(&r.step_ms, 0.5), series_quantile(&r.step_ms, 0.95),
+               series_quantile(&r.step_ms, 1.0));
+        printf("per step (the paper's Table 3): LCP trials %.0f / %.2f / %.0f, CG iterations "
+               "%.0f / %.1f / %.0f (min / mean / max)\n",
+               lo, mean, hi, ilo, imean, ihi);
+    }
+    run_free(&r);
+    return 0;
 }

@@ -24,7 +24,8 @@ static const char usage[] =
     "      DIR/trajectory.csv\n"
     "  needlesim validate [CASE...] [--json] [--list]\n"
     "      run the built-in validation cases (docs/validation.md); exit 1 if any fails\n"
-    "  needlesim bench SCENARIO.lua [...]                 (not available in this version yet)\n"
+    "  needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--json]\n"
+    "      per-stage step timings of the scenario's script (the paper's Tables 2 and 3)\n"
     "  needlesim --help | --version\n"
     "\n"
     "Scenarios are Lua files; see docs/scenarios.md.\n";
@@ -66,10 +67,8 @@ int main(int argc, char **argv)
         return ns_cmd_validate(argc - 1, argv + 1);
     if (strcmp(cmd, "run") == 0)
         return ns_cmd_run(argc - 1, argv + 1);
-    if (strcmp(cmd, "bench") == 0) {
-        fprintf(stderr, "needlesim: '%s' is not available in this version yet\n", cmd);
-        return 2;
-    }
+    if (strcmp(cmd, "bench") == 0)
+        return ns_cmd_bench(argc - 1, argv + 1);
     if (cmd[0] == '-')
         fprintf(stderr, "needlesim: unknown option '%s'\n", cmd);
     else

@@ -159,7 +159,10 @@ fi
 
 expect_error "no command: usage, exit 2" 2 "usage:" --
 expect_error "unknown command: exit 2" 2 "unknown command 'frobnicate'" -- frobnicate
-expect_error "bench not built yet: exit 2" 2 "'bench' is not available" -- bench x.lua
+expect_error "bench --compare not built yet: exit 2" 2 "--compare is not available" -- \
+    bench scenarios/tutorial.lua --compare paper
+expect_error "bench: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
+    bench scenarios/tutorial.lua --bogus
 expect_error "check: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
     check scenarios/phantom_single_bend.lua --bogus
 expect_error "check: no scenario, exit 2" 2 "missing SCENARIO.lua" -- check --json

@@ -264,6 +264,30 @@ else
     fail "twist and retract" "exit $rc: $(head -1 "$TMP/err_tw") $(tail -1 "$TMP/py_tw")"
 fi
 
+# needlesim bench: the contract's keys, as many steps as asked, nothing written (it runs in an
+# empty folder, which stays empty).
+mkdir "$TMP/bench_cwd"
+BIN_ABS=$(cd "$(dirname "$BIN")" && pwd)/$(basename "$BIN")
+TUT_ABS=$(cd "$(dirname "$TUT")" && pwd)/$(basename "$TUT")
+(cd "$TMP/bench_cwd" && "$BIN_ABS" bench "$TUT_ABS" --steps 5 --json >"$TMP/bench.json" 2>"$TMP/err_b")
+rc=$?
+if [ $rc = 0 ] && [ -z "$(ls -A "$TMP/bench_cwd")" ] &&
+    python3 - "$TMP/bench.json" "$TMP/finite.py" <<'PY' 2>"$TMP/py_b"; then
+import json, math, sys
+r = json.load(open(sys.argv[1]))
+exec(open(sys.argv[2]).read())
+finite(r, "bench")
+for k in ["step_ms", "stages_ms", "lcp_trials", "cg_iterations"]:
+    assert k in r, "missing " + k
+for k in ["total", "lcp", "tissue", "needle", "remesh"]:
+    assert k in r["stages_ms"], "missing stages_ms." + k
+assert r["steps"] == 5, r["steps"]
+PY
+    pass "bench --json: the contract's keys, 5 steps, nothing written"
+else
+    fail "bench --json" "exit $rc: $(head -1 "$TMP/err_b") $(tail -1 "$TMP/py_b")"
+fi
+
 # Usage errors: exit 2.
 "$BIN" run "$TUT" --bogus >/dev/null 2>"$TMP/err_u"
 rc=$?
