@@ -138,6 +138,7 @@ typedef struct Run {
     long steps;
     int consistent, nan, inverted, unconverged, lcp_unresolved;
     double max_axial, last_axial, path_cut, wall_s, last_tip[3];
+    int last_fr[3], last_cutting; /* friction-state counts and cutting at the last step */
     int *target_hint, *marker_hint;
     /* seeds released so far: material point, time, target index (-1: nearest at the end) */
     struct Seed {
@@ -459,6 +460,19 @@ static int tick_body(lua_State *L)
     set_num(L, si, "depth", depth_of(r));
     set_vec(L, si, "tip", tip_of(r));
     set_num(L, si, "axial_force", r->last_axial);
+    double tt[3], m1[3], m2[3];
+    ns_rod_tip_frame(&r->rod, tt, m1, m2);
+    set_vec(L, si, "tip_direction", tt);
+    set_vec(L, si, "bevel_direction", m2);
+    lua_pushstring(L, "friction"); /* coupling nodes per friction state, last step */
+    lua_createtable(L, 0, 4);
+    set_num(L, lua_gettop(L), "sticking", r->last_fr[0]);
+    set_num(L, lua_gettop(L), "sliding_in", r->last_fr[1]);
+    set_num(L, lua_gettop(L), "sliding_out", r->last_fr[2]);
+    lua_pushstring(L, "cutting");
+    lua_pushboolean(L, r->last_cutting);
+    lua_rawset(L, -3);
+    lua_rawset(L, si);
     lua_pushstring(L, "seeds_dropped");
     lua_pushinteger(L, r->seed_n);
     lua_rawset(L, si);
@@ -1185,6 +1199,10 @@ static int run_loop(Run *r, char *err, int err_sz)
         r->lcp_unresolved += st.consistent == 0;
         r->max_axial = fmax(r->max_axial, fabs(st.axial_force));
         r->last_axial = st.axial_force;
+        r->last_fr[0] = st.n_static;
+        r->last_fr[1] = st.n_dyn_pos;
+        r->last_fr[2] = st.n_dyn_neg;
+        r->last_cutting = st.cutting;
         const double *tp = tip_of(r);
         if (st.cutting) { /* the length of tissue cut: the tip's path */
             double d[3] = {tp[0] - r->last_tip[0], tp[1] - r->last_tip[1], tp[2] - r->last_tip[2]};
