@@ -1,17 +1,20 @@
-/* needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME] [--no-render]
- *                            [--quiet]
+/* needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]
+ *                            [--set KEY=VALUE]... [--record LOG | --replay LOG] [--quiet]
+ * needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--json]
  *
  * The run loop (DESIGN.md "Command line"): the scenario's tissue and needle are built, the
  * needle's entry track is laid into the mesh at the scenario's entry, and every tick the
- * scenario's script (scripts/needlesim/actions.lua, on a coroutine) and its on_tick set the
- * needle's controls, the coupled solver steps (paper Algorithm 1 with remeshing at the tip,
- * Algorithm 2), and the trajectory is logged. At the end the targets (material points, so they
- * move with the tissue) are scored against the needle tip, and DIR/report.json and
+ * scenario's script (scripts/needlesim/actions.lua, on a coroutine) and its on_tick, or a
+ * replayed control log, set the needle's controls; seeds are released, the coupled solver steps
+ * (paper Algorithm 1 with remeshing at the tip, Algorithm 2), obstacles are checked and the
+ * trajectory is logged. At the end the targets (material points, so they move with the tissue)
+ * are scored against their seeds or the needle tip, and DIR/report.json and
  * DIR/trajectory.csv are written (docs/scenarios.md documents both). A failed run writes
  * neither: both are written to temporary names and renamed only when the run succeeded.
+ * `bench` runs the same loop for a number of steps and prints the stage timings.
  *
- * Not in this version yet (exit 2 with a message): --frames, --video, --set, --record,
- * --replay; seeds, obstacles and markers. */
+ * Not in this version yet (exit 2 with a message): --frames, --video, --width, --height;
+ * bench --compare. */
 #include <errno.h>
 #include <lauxlib.h>
 #include <math.h>
@@ -834,6 +837,13 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_string(&j, ns_coupled_solver_name((NsCoupledSolverKind)r->opt.solver));
     ns_json_key(&j, "threads");
     ns_json_int(&j, r->opt.threads);
+    ns_json_key(&j, "sets");
+    ns_json_begin_array(&j);
+    for (int i = 0; i < r->opt.nsets; i++)
+        ns_json_string(&j, r->opt.sets[i]);
+    ns_json_end_array(&j);
+    ns_json_key(&j, "replayed_from");
+    ns_json_string(&j, r->opt.replay ? r->opt.replay : "");
     ns_json_key(&j, "steps");
     ns_json_int(&j, r->steps);
     ns_json_key(&j, "script_finished");
@@ -1156,7 +1166,10 @@ static int run_loop(Run *r, char *err, int err_sz)
         } else if (script_tick(r, t, exited, &more, &drop, err, err_sz)) {
             return -1;
         }
-        if (r->rec && (more || max_steps > 0)) {
+        /* The script ended at this tick: nothing of it is applied, recorded or stepped. */
+        if ((max_steps == 0 || r->stop_when_done) && !more)
+            break;
+        if (r->rec) {
             NsControl c = {r->rod.v_insert,
                            {r->rod.v_base[0], r->rod.v_base[1], r->rod.v_base[2]},
                            r->rod.twist_rate,
@@ -1168,8 +1181,6 @@ static int run_loop(Run *r, char *err, int err_sz)
         if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
             r->insertions++;
         r->prev_v = r->rod.v_insert;
-        if ((max_steps == 0 || r->stop_when_done) && !more)
-            break;
         NsCouplingStats st;
         double w0 = now_s();
         int rc = ns_coupled_step(&r->c, sp->dt, NULL, NULL, &st);
@@ -1303,6 +1314,9 @@ static int parse_args(int argc, char **argv, RunOpts *o)
                     return usage_error("--set '%s': expected KEY=VALUE", v);
                 if (o->nsets == 32)
                     return usage_error("%s", "at most 32 --set values");
+                for (int k = 0; k < o->nsets; k++)
+                    if (strncmp(o->sets[k], v, (size_t)(eq - v) + 1) == 0)
+                        return usage_error("--set: '%s' is given twice", v);
                 o->sets[o->nsets++] = v;
             } else if (strcmp(a, "--record") == 0) {
                 o->record = v;
@@ -1374,6 +1388,28 @@ int ns_cmd_run(int argc, char **argv)
     }
     if (rc == 0 && r.opt.replay)
         rc = ns_control_log_read(r.opt.replay, r.spec.dt, &r.replay, err, sizeof err);
+    if (rc == 0 && r.opt.replay) { /* the same --set values as the recording */
+        bool same = r.replay.nsets == r.opt.nsets;
+        for (int i = 0; same && i < r.opt.nsets; i++) {
+            bool found = false;
+            for (int k = 0; k < r.replay.nsets && !found; k++)
+                found = strcmp(r.replay.sets[k], r.opt.sets[i]) == 0;
+            same = found;
+        }
+        if (!same) {
+            char rec[512] = "", now[512] = "";
+            for (int k = 0; k < r.replay.nsets; k++)
+                snprintf(rec + strlen(rec), sizeof rec - strlen(rec), " --set %s",
+                         r.replay.sets[k]);
+            for (int i = 0; i < r.opt.nsets; i++)
+                snprintf(now + strlen(now), sizeof now - strlen(now), " --set %s", r.opt.sets[i]);
+            ns_set_err(err, sizeof err,
+                       "%s: the log was recorded with%s, this replay has%s: give the same --set "
+                       "values",
+                       r.opt.replay, rec[0] ? rec : " no --set", now[0] ? now : " none");
+            rc = -1;
+        }
+    }
     if (rc == 0 && r.opt.record) {
         size_t n = strlen(r.opt.record) + 6;
         r.rec_tmp = malloc(n);
@@ -1385,7 +1421,7 @@ int ns_cmd_run(int argc, char **argv)
                        strerror(errno));
             rc = -1;
         } else {
-            ns_control_log_write_header(r.rec);
+            ns_control_log_write_header(r.rec, r.opt.sets, r.opt.nsets);
         }
     }
     if (rc == 0)
@@ -1400,7 +1436,8 @@ int ns_cmd_run(int argc, char **argv)
     }
     uint64_t hash = rc == 0 ? ns_coupled_state_hash(&r.c) : 0;
     if (rc == 0) {
-        if (fclose(r.traj) != 0) {
+        int bad = ferror(r.traj) != 0;
+        if ((fclose(r.traj) != 0) | bad) {
             r.traj = NULL;
             ns_set_err(err, sizeof err, "cannot write the trajectory: %s", strerror(errno));
             rc = -1;
@@ -1408,15 +1445,6 @@ int ns_cmd_run(int argc, char **argv)
         r.traj = NULL;
     }
     rc = rc ? rc : write_report(&r, &res, hash, err, sizeof err);
-    if (rc == 0 && r.rec) {
-        int bad = fclose(r.rec) != 0;
-        r.rec = NULL;
-        if (bad || rename(r.rec_tmp, r.opt.record) != 0) {
-            ns_set_err(err, sizeof err, "cannot write the control log '%s': %s", r.opt.record,
-                       strerror(errno));
-            rc = -1;
-        }
-    }
     if (rc == 0) {
         char *traj = path_join(r.opt.out_dir, "trajectory.csv");
         char *rep = path_join(r.opt.out_dir, "report.json");
@@ -1426,6 +1454,19 @@ int ns_cmd_run(int argc, char **argv)
             if (traj)
                 remove(traj);
             rc = -1;
+        }
+        /* The control log last: a log on disk means the run and its report are there. */
+        if (rc == 0 && r.rec) {
+            int bad = ferror(r.rec) != 0;
+            bad |= fclose(r.rec) != 0;
+            r.rec = NULL;
+            if (bad || rename(r.rec_tmp, r.opt.record) != 0) {
+                ns_set_err(err, sizeof err, "cannot write the control log '%s': %s", r.opt.record,
+                           strerror(errno));
+                remove(traj);
+                remove(rep);
+                rc = -1;
+            }
         }
         free(traj);
         free(rep);
@@ -1577,7 +1618,6 @@ int ns_cmd_bench(int argc, char **argv)
     }
     if (r.opt.steps == 0)
         r.opt.steps = 200;
-    r.stop_when_done = true;
     char err[1024] = "";
     int rc = -1;
     if (ns_scenario_load_set(r.opt.scenario, r.opt.sets, r.opt.nsets, &r.sc, err, sizeof err) ==
@@ -1588,9 +1628,15 @@ int ns_cmd_bench(int argc, char **argv)
             rc = 0;
         }
     }
+    r.stop_when_done = rc == 0 && r.spec.has_script; /* a script's end ends a bench early */
     rc = rc ? rc : script_start(&r, err, sizeof err);
     rc = rc ? rc : build(&r, err, sizeof err);
     rc = rc ? rc : run_loop(&r, err, sizeof err);
+    if (rc == 0 && r.steps == 0) {
+        ns_set_err(err, sizeof err, "%s: the script ended before the first step: nothing to time",
+                   r.sc.path);
+        rc = -1;
+    }
     if (rc) {
         size_t n = strlen(r.opt.scenario);
         bool located = strncmp(err, "needlesim", 9) == 0 || strncmp(err, r.opt.scenario, n) == 0;

@@ -15,8 +15,10 @@ void ns_control_log_free(NsControlLog *log)
     log->n = 0;
 }
 
-void ns_control_log_write_header(FILE *f)
+void ns_control_log_write_header(FILE *f, const char *const *sets, int nsets)
 {
+    for (int i = 0; i < nsets; i++)
+        fprintf(f, "#set %s\n", sets[i]);
     fputs(NS_CONTROL_LOG_HEADER "\n", f);
 }
 
@@ -49,18 +51,33 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
     char line[1024];
     long lineno = 0, cap = 0, blank = 0;
     int rc = 0;
-    if (!fgets(line, sizeof line, f)) {
-        ns_set_err(err, err_sz, "%s:1: empty control log (want the header %s)", path,
+    /* '#' lines before the header: what the log was recorded with ("#set KEY=VALUE"). */
+    int got = 0;
+    while ((got = fgets(line, sizeof line, f) != NULL)) {
+        lineno++;
+        char *p = line;
+        if (lineno == 1 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB &&
+            (unsigned char)p[2] == 0xBF)
+            p += 3; /* a UTF-8 byte-order mark */
+        chomp(p);
+        if (p[0] != '#') {
+            memmove(line, p, strlen(p) + 1);
+            break;
+        }
+        if (strncmp(p, "#set ", 5) == 0 && log->nsets < NS_CONTROL_LOG_MAX_SETS &&
+            strlen(p + 5) < sizeof log->sets[0])
+            memcpy(log->sets[log->nsets++], p + 5, strlen(p + 5) + 1);
+    }
+    if (!got) {
+        ns_set_err(err, err_sz, "%s:%ld: no header (want %s)", path, lineno + 1,
                    NS_CONTROL_LOG_HEADER);
         rc = -1;
-    } else {
-        lineno = 1;
-        chomp(line);
-        if (strcmp(line, NS_CONTROL_LOG_HEADER) != 0) {
-            ns_set_err(err, err_sz, "%s:1: the header must be %s", path, NS_CONTROL_LOG_HEADER);
-            rc = -1;
-        }
+    } else if (strcmp(line, NS_CONTROL_LOG_HEADER) != 0) {
+        ns_set_err(err, err_sz, "%s:%ld: the header must be %s", path, lineno,
+                   NS_CONTROL_LOG_HEADER);
+        rc = -1;
     }
+    long header_line = lineno;
     while (rc == 0 && fgets(line, sizeof line, f)) {
         lineno++;
         if (!strchr(line, '\n') && !feof(f)) {
@@ -104,7 +121,11 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
             char *end;
             errno = 0;
             v[k] = strtod(field[k], &end);
-            if (field[k][0] == '\0' || *end != '\0' || errno == ERANGE || !isfinite(v[k])) {
+            /* Decimal numbers only (no hex floats, spaces or "inf"); tiny values that
+             * underflow to subnormals are kept (strtod's ERANGE): they round-trip. */
+            size_t len = strlen(field[k]);
+            if (len == 0 || strspn(field[k], "0123456789+-.eE") != len || *end != '\0' ||
+                !isfinite(v[k])) {
                 ns_set_err(err, err_sz, "%s:%ld: %s must be a finite number (got '%s')", path,
                            lineno, columns[k], field[k]);
                 rc = -1;
@@ -112,7 +133,7 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
         }
         if (rc)
             break;
-        long k = lineno - 2; /* the step */
+        long k = lineno - header_line - 1; /* the step */
         if (fabs(v[0] - (double)k * dt) > 1e-3 * dt) {
             ns_set_err(err, err_sz,
                        "%s:%ld: t_s is %.9g but row %ld of a run stepping by dt = %g s is at "
@@ -151,7 +172,7 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
         rc = -1;
     }
     if (rc == 0 && log->n == 0) {
-        ns_set_err(err, err_sz, "%s:2: the control log has no rows", path);
+        ns_set_err(err, err_sz, "%s:%ld: the control log has no rows", path, lineno + 1);
         rc = -1;
     }
     fclose(f);

@@ -7,7 +7,9 @@
  *     0.01,0.02,0,0,0,0,drop_seed
  *
  * Row k holds the controls applied for the step from t = k dt; numbers are written with 17
- * significant digits, so a replay applies exactly the recorded values. */
+ * significant digits, so a replay applies exactly the recorded values. Lines starting with '#'
+ * may come before the header; "#set KEY=VALUE" lines name the --set values of the recorded run,
+ * which its replay must repeat. */
 #ifndef NS_CONTROL_LOG_H
 #define NS_CONTROL_LOG_H
 
@@ -23,18 +25,24 @@ typedef struct NsControl {
     int drop_seed;     /* event: release a seed at the tip before the step */
 } NsControl;
 
+#define NS_CONTROL_LOG_MAX_SETS 32
+
 typedef struct NsControlLog {
     NsControl *rows;
     long n;
+    char sets[NS_CONTROL_LOG_MAX_SETS][256]; /* the --set KEY=VALUE it was recorded with */
+    int nsets;
 } NsControlLog;
 
-/* Reads a log for a scenario stepping by dt: the header above, then one row per step whose t
- * is k dt (within dt / 1000), finite numbers, the event empty or "drop_seed". Returns 0, or -1
- * with "path:line: ..." in err. */
+/* Reads a log for a scenario stepping by dt: '#' lines, the header above, then one row per step
+ * whose t is k dt (within dt / 1000), finite decimal numbers, the event empty or "drop_seed".
+ * Returns 0, or -1 with "path:line: ..." in err. */
 int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz);
 void ns_control_log_free(NsControlLog *log);
 
-void ns_control_log_write_header(FILE *f);
+/* Writes "#set KEY=VALUE" for each --set the run has (a replay must be given the same ones),
+ * then the header line. */
+void ns_control_log_write_header(FILE *f, const char *const *sets, int nsets);
 void ns_control_log_write_row(FILE *f, double t, const NsControl *c);
 
 #endif

@@ -11,10 +11,24 @@
 #include "mesh.h"
 #include "remesh.h"
 
+/* t[key] without metamethods (pushed; its type returned): a scenario may put metatables on
+ * the tables it returns, and none of them may run outside a protected call. Not a table:
+ * nil. */
+static int raw_field(lua_State *L, int idx, const char *key)
+{
+    idx = lua_absindex(L, idx);
+    if (!lua_istable(L, idx)) {
+        lua_pushnil(L);
+        return LUA_TNIL;
+    }
+    lua_pushstring(L, key);
+    return lua_rawget(L, idx);
+}
+
 static double num_field(lua_State *L, int idx, const char *key, double dflt)
 {
     double v = dflt;
-    if (lua_getfield(L, idx, key) == LUA_TNUMBER)
+    if (raw_field(L, idx, key) == LUA_TNUMBER)
         v = lua_tonumber(L, -1);
     lua_pop(L, 1);
     return v;
@@ -23,8 +37,8 @@ static double num_field(lua_State *L, int idx, const char *key, double dflt)
 static void vec_field(lua_State *L, int idx, const char *key, double out[3])
 {
     out[0] = out[1] = out[2] = 0.0;
-    if (lua_getfield(L, idx, key) == LUA_TTABLE)
-        for (int i = 0; i < 3; i++) {
+    if (raw_field(L, idx, key) == LUA_TTABLE)
+        for (int i = 0; i < 3; i++) { /* (a table: rawgeti is safe) */
             lua_rawgeti(L, -1, i + 1);
             out[i] = lua_tonumber(L, -1);
             lua_pop(L, 1);
@@ -35,7 +49,7 @@ static void vec_field(lua_State *L, int idx, const char *key, double out[3])
 static char *str_field(lua_State *L, int idx, const char *key, const char *dflt)
 {
     const char *s = dflt;
-    if (lua_getfield(L, idx, key) == LUA_TSTRING)
+    if (raw_field(L, idx, key) == LUA_TSTRING)
         s = lua_tostring(L, -1);
     size_t n = strlen(s);
     char *out = malloc(n + 1);
@@ -51,7 +65,7 @@ static int read_lists(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int s
                       int err_sz)
 {
     int rc = 0;
-    if (lua_getfield(L, si, "markers") == LUA_TTABLE) {
+    if (raw_field(L, si, "markers") == LUA_TTABLE) {
         int li = lua_gettop(L), n = (int)lua_rawlen(L, li);
         spec->markers = calloc((size_t)n + 1, sizeof *spec->markers);
         if (!spec->markers)
@@ -75,7 +89,7 @@ static int read_lists(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int s
         }
     }
     lua_pop(L, 1);
-    if (rc == 0 && lua_getfield(L, si, "obstacles") == LUA_TTABLE) {
+    if (rc == 0 && raw_field(L, si, "obstacles") == LUA_TTABLE) {
         int li = lua_gettop(L), n = (int)lua_rawlen(L, li);
         spec->obstacles = calloc((size_t)n + 1, sizeof *spec->obstacles);
         if (!spec->obstacles)
@@ -109,7 +123,7 @@ static int read_lists(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int s
         }
     }
     lua_pop(L, 1);
-    if (rc == 0 && lua_getfield(L, si, "seeds") == LUA_TTABLE) {
+    if (rc == 0 && raw_field(L, si, "seeds") == LUA_TTABLE) {
         int li = lua_gettop(L), n = (int)lua_rawlen(L, li);
         spec->seed_target = calloc((size_t)n + 1, sizeof *spec->seed_target);
         if (!spec->seed_target)
@@ -162,7 +176,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     int si = lua_gettop(L);
     int rc = 0;
     /* The needle: the stiff 18 G default when none is given (scripts/needlesim.lua). */
-    if (lua_getfield(L, si, "needle") == LUA_TTABLE) {
+    if (raw_field(L, si, "needle") == LUA_TTABLE) {
         int ni = lua_gettop(L);
         spec->needle_kind = str_field(L, ni, "kind", "stiff");
         spec->diameter = num_field(L, ni, "diameter", 0.0);
@@ -185,10 +199,10 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         spec->bevel_deg = 30.0;
     }
     lua_pop(L, 1);
-    if (lua_getfield(L, si, "entry") == LUA_TTABLE) {
+    if (raw_field(L, si, "entry") == LUA_TTABLE) {
         vec_field(L, lua_gettop(L), "point", spec->entry_point);
         vec_field(L, lua_gettop(L), "direction", spec->entry_dir);
-        lua_getfield(L, lua_gettop(L), "bevel_toward");
+        raw_field(L, lua_gettop(L), "bevel_toward");
         spec->has_bevel_toward = lua_istable(L, -1);
         lua_pop(L, 1);
         if (spec->has_bevel_toward)
@@ -203,13 +217,13 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     lua_pop(L, 1);
     spec->dt = num_field(L, si, "dt", 0.01);
     spec->duration = num_field(L, si, "duration", 0.0);
-    lua_getfield(L, si, "script");
+    raw_field(L, si, "script");
     spec->has_script = lua_isfunction(L, -1);
     lua_pop(L, 1);
-    lua_getfield(L, si, "on_tick");
+    raw_field(L, si, "on_tick");
     spec->has_on_tick = lua_isfunction(L, -1);
     lua_pop(L, 1);
-    if (rc == 0 && lua_getfield(L, si, "targets") == LUA_TTABLE) {
+    if (rc == 0 && raw_field(L, si, "targets") == LUA_TTABLE) {
         int ti = lua_gettop(L);
         int n = (int)lua_rawlen(L, ti);
         spec->targets = calloc(n > 0 ? (size_t)n : 1, sizeof *spec->targets);
@@ -238,12 +252,6 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
     lua_settop(L, top);
-    if (rc == 0 && !spec->has_script && !spec->has_on_tick && spec->duration <= 0.0) {
-        ns_set_err(err, err_sz,
-                   "%s: ns.scenario: nothing to run: give a script, an on_tick or a duration",
-                   sc->where);
-        rc = -1;
-    }
     if (rc)
         ns_run_spec_free(spec);
     return rc;

@@ -932,7 +932,12 @@ static int check_sets(Builder *b, const char *const *sets, int nsets)
 {
     lua_State *L = b->L;
     int rc = 0;
-    lua_getglobal(L, "__ns_params"); /* KEY -> true for every ns.param the scenario called */
+    /* KEY -> true for every ns.param the scenario called; read raw from the globals table (a
+     * scenario may have put a metatable on _G). */
+    lua_rawgeti(L, LUA_REGISTRYINDEX, LUA_RIDX_GLOBALS);
+    lua_pushstring(L, "__ns_params");
+    lua_rawget(L, -2);
+    lua_remove(L, -2);
     for (int i = 0; i < nsets && rc == 0; i++) {
         const char *eq = strchr(sets[i], '=');
         lua_pushlstring(L, sets[i], (size_t)(eq - sets[i]));
@@ -949,8 +954,8 @@ static int check_sets(Builder *b, const char *const *sets, int nsets)
                                  known[0] ? ", " : "", lua_tostring(L, -1));
                 }
             }
-            rc = fail(b, "%s: --set %.*s: the scenario has no parameter '%.*s' (%s%s)",
-                      b->sc->path, (int)(eq - sets[i]), sets[i], (int)(eq - sets[i]), sets[i],
+            rc = fail(b, "%s: --set %.*s: the scenario has no parameter '%.*s' (%s%s)", b->sc->path,
+                      (int)(eq - sets[i]), sets[i], (int)(eq - sets[i]), sets[i],
                       known[0] ? "its parameters: " : "it reads none with ns.param", known);
         }
     }

@@ -17,7 +17,7 @@
 -- rounds the box's edges on its max faces (see docs/scenarios.md).
 --
 -- The paper's phantom mesh had 2,280 tets and 672 nodes; this one is of the same size
--- (`needlesim check scenarios/phantom.lua`).
+-- (`needlesim check scenarios/phantom_single_bend.lua`).
 local ns = require "needlesim"
 local act = require "needlesim.actions"
 

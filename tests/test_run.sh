@@ -152,8 +152,18 @@ same_run() { # name, report A, report B
     b=$(python3 -c "$get" "$3" 2>/dev/null)
     if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "$1"; else fail "$1" "$a / $b"; fi
 }
-"$BIN" run "$TUT" -o "$TMP/t3" --replay "$TMP/t1.csv" --quiet >/dev/null 2>"$TMP/err3"
-same_run "--record then --replay: same state hash and score" "$TMP/t1/report.json" "$TMP/t3/report.json"
+# Replayed into a copy of the scenario without its script: the log alone drives the needle.
+sed '/^    script = function()$/,/^    end,$/d' "$TUT" >"$TMP/noscript.lua"
+if grep -q "act.insert" "$TMP/noscript.lua"; then fail "script removed from the copy" "sed"; fi
+"$BIN" run "$TMP/noscript.lua" -o "$TMP/t3" --replay "$TMP/t1.csv" --quiet >/dev/null 2>"$TMP/err3"
+same_run "--record then --replay (scenario without its script): same state hash and score" \
+    "$TMP/t1/report.json" "$TMP/t3/report.json"
+# ... and a log changed in one row drives it elsewhere.
+sed '40s/^\([^,]*\),[^,]*,/\1,0.03,/' "$TMP/t1.csv" >"$TMP/t1_changed.csv"
+"$BIN" run "$TMP/noscript.lua" -o "$TMP/t4" --replay "$TMP/t1_changed.csv" --quiet >/dev/null 2>"$TMP/err4"
+h1=$(grep '"state_hash"' "$TMP/t1/report.json")
+h4=$(grep '"state_hash"' "$TMP/t4/report.json" 2>/dev/null)
+if [ -n "$h4" ] && [ "$h1" != "$h4" ]; then pass "a log changed in one row gives another state"; else fail "changed log" "$h1 / $h4 $(head -1 "$TMP/err4")"; fi
 if [ "$(wc -l <"$TMP/t1.csv")" = "$(($(grep -o '"steps": [0-9]*' "$TMP/t1/report.json" | grep -o '[0-9]*$') + 1))" ]; then
     pass "the log has a header and one row per step"
 else
@@ -162,6 +172,8 @@ fi
 # A malformed row: exit 1 naming the log's line, nothing written.
 bad_log() { # name, sed expression on the log, expected message (grep -E)
     sed "$2" "$TMP/t1.csv" >"$TMP/$1.csv"
+    mkdir -p "$TMP/o_$1"
+    echo '{"stale": true}' >"$TMP/o_$1/report.json"
     "$BIN" run "$TUT" -o "$TMP/o_$1" --replay "$TMP/$1.csv" --quiet >/dev/null 2>"$TMP/err_$1"
     local rc=$?
     if [ $rc = 1 ] && grep -Eq "$3" "$TMP/err_$1" && [ ! -e "$TMP/o_$1/report.json" ]; then
@@ -230,6 +242,26 @@ if [ $rc = 1 ] && grep -q "tutorial.lua: --set needle.kynd: the scenario has no 
 else
     fail "--set unknown key" "exit $rc: $(head -1 "$TMP/err_set")"
 fi
+# --set reaches ns.param, converted to the default's type; a replay needs the same --set.
+sed -e 's/^local h = 0.005.*$/&\nlocal speed = ns.param("speed", 0.02)/' \
+    -e 's/speed = 0.02, depth/speed = speed, depth/' "$TUT" >"$TMP/param.lua"
+"$BIN" run "$TMP/param.lua" --set speed=0.04 --steps 3 -o "$TMP/o_param" --record "$TMP/param.csv" \
+    --quiet >/dev/null 2>"$TMP/err_param"
+rc=$?
+v=$(sed -n 2p "$TMP/o_param/trajectory.csv" 2>/dev/null | cut -d, -f7)
+if [ $rc = 0 ] && [ "$v" = "0.04" ] && grep -q '"speed=0.04"' "$TMP/o_param/report.json"; then
+    pass "--set speed=0.04 reaches ns.param (v_insert $v) and the report"
+else
+    fail "--set value" "exit $rc, v_insert '$v': $(head -1 "$TMP/err_param")"
+fi
+"$BIN" run "$TMP/param.lua" --steps 3 -o "$TMP/o_param2" --replay "$TMP/param.csv" --quiet \
+    >/dev/null 2>"$TMP/err_param2"
+rc=$?
+if [ $rc = 1 ] && grep -q "recorded with --set speed=0.04, this replay has none" "$TMP/err_param2"; then
+    pass "a replay without the recording's --set: exit 1"
+else
+    fail "replay --set mismatch" "exit $rc: $(head -1 "$TMP/err_param2")"
+fi
 "$BIN" run "$TUT" --set oops -o "$TMP/o_set2" --quiet >/dev/null 2>"$TMP/err_set2"
 rc=$?
 if [ $rc = 2 ] && grep -q "expected KEY=VALUE" "$TMP/err_set2"; then pass "--set without '=': exit 2"; else fail "--set without =" "exit $rc"; fi
@@ -287,6 +319,12 @@ PY
 else
     fail "bench --json" "exit $rc: $(head -1 "$TMP/err_b") $(tail -1 "$TMP/py_b")"
 fi
+
+# bench of a script that ends at once: nothing to time, exit 1.
+sed -e '/act.insert/d' -e '/act.wait/d' "$TUT" >"$TMP/empty_script.lua"
+"$BIN" bench "$TMP/empty_script.lua" --steps 5 >/dev/null 2>"$TMP/err_b0"
+rc=$?
+if [ $rc = 1 ] && grep -q "nothing to time" "$TMP/err_b0"; then pass "bench of a script that ends at once: exit 1"; else fail "bench, empty script" "exit $rc: $(head -1 "$TMP/err_b0")"; fi
 
 # Usage errors: exit 2.
 "$BIN" run "$TUT" --bogus >/dev/null 2>"$TMP/err_u"
