@@ -141,6 +141,10 @@ typedef struct Run {
     long steps;
     int consistent, nan, inverted, unconverged, lcp_unresolved;
     double max_axial, last_axial, path_cut, wall_s, last_tip[3];
+    NsMesh orig; /* the tissue's mesh as built: every needle's exit restores it */
+    bool have_orig;
+    int exited;                   /* the current needle has been withdrawn out of the tissue */
+    int needles;                  /* needles used so far */
     int last_fr[3], last_cutting; /* friction-state counts and cutting at the last step */
     int *target_hint, *marker_hint;
     /* seeds released so far: material point, time, target index (-1: nearest at the end) */
@@ -200,20 +204,18 @@ static int world_of(const NsMesh *m, const double u[3], int *hint, double x[3])
     return 0;
 }
 
-/* Tissue, entry track, needle and coupling (the set-up of the validation's remeshing cases,
- * engine/validate_remesh.c, at the scenario's entry). */
-static int build(Run *r, char *err, int err_sz)
+/* The needle at the current entry (spec.entry_*): its entry track laid into the tissue's mesh
+ * (material and world; about one and a half elements along the entry direction, so that the
+ * needle starts with two tissue nodes: skin entry itself is not modelled yet, issue 6), the
+ * tissue synced, the rod and the coupling made (the set-up of the validation's remeshing cases,
+ * engine/validate_remesh.c), and the nodes the track moved recorded so that they go back when
+ * the needle leaves. `what` names the caller for messages. */
+static int place_needle(Run *r, const char *what, char *err, int err_sz)
 {
     NsScenario *sc = &r->sc;
     NsRunSpec *sp = &r->spec;
-    NsMesh orig;
-    if (ns_mesh_copy(&orig, &sc->mesh)) {
-        ns_set_err(err, err_sz, "out of memory");
-        return -1;
-    }
-    /* The entry track: about one and a half elements along the entry direction, so that the
-     * needle starts with two tissue nodes (skin entry itself is not modelled yet, issue 6). */
-    double h = sc->resolution > 0.0 ? sc->resolution : ns_mesh_mean_edge(&orig);
+    NsMesh *M = &r->tissue.mesh;
+    double h = sc->resolution > 0.0 ? sc->resolution : ns_mesh_mean_edge(&r->orig);
     double a[3], b[3];
     for (int i = 0; i < 3; i++) {
         a[i] = sp->entry_point[i];
@@ -221,32 +223,16 @@ static int build(Run *r, char *err, int err_sz)
     }
     int nodes[64];
     char e2[512];
-    int np = ns_needle_path_lay(&sc->mesh, a, b, 0.75, nodes, 64, e2, sizeof e2);
+    int np = ns_needle_path_lay(M, a, b, 0.75, nodes, 64, e2, sizeof e2);
     if (np < 2) {
         ns_set_err(err, err_sz,
-                   "%s: ns.scenario: entry: no needle track can start at (%g, %g, %g) m along "
-                   "(%g, %g, %g): %s",
-                   sc->where, a[0], a[1], a[2], sp->entry_dir[0], sp->entry_dir[1],
-                   sp->entry_dir[2], np < 0 ? e2 : "it crosses fewer than 2 mesh nodes");
-        ns_mesh_free(&orig);
+                   "%s: no needle track can start at (%g, %g, %g) m along (%g, %g, %g): %s", what,
+                   a[0], a[1], a[2], sp->entry_dir[0], sp->entry_dir[1], sp->entry_dir[2],
+                   np < 0 ? e2 : "it crosses fewer than 2 mesh nodes");
         return -1;
     }
-    NsTissueParams tp = ns_default_tissue_params();
-    tp.gamma = 0.55; /* slightly dissipative Newmark, as the validation's coupled cases */
-    tp.beta = 0.25 * 1.05 * 1.05;
-    tp.threads = r->opt.threads;
-    if (sc->region_count > NS_COUPLING_MAX_REGIONS) {
-        ns_set_err(err, err_sz, "%s: the tissue has %d regions; the coupling takes at most %d",
-                   sc->tissue_where, sc->region_count, NS_COUPLING_MAX_REGIONS);
-        ns_mesh_free(&orig);
+    if (ns_tissue_sync_topology(&r->tissue, err, err_sz))
         return -1;
-    }
-    if (ns_scenario_tissue(sc, &tp, &r->tissue, err, err_sz)) {
-        ns_mesh_free(&orig);
-        return -1;
-    }
-    r->have_tissue = true;
-    const NsMesh *M = &r->tissue.mesh;
     /* The needle: four nodes 5 mm apart outside, behind the entry node, then the track. */
     double x[3 * 68], d[3];
     memcpy(d, sp->entry_dir, sizeof d);
@@ -257,8 +243,8 @@ static int build(Run *r, char *err, int err_sz)
     for (int i = 0; i < np; i++)
         memcpy(x + 3 * (4 + i), M->x + 3 * nodes[i], 3 * sizeof *x);
     NsRodParams rp = ns_default_rod_params();
-    rp.gamma = tp.gamma;
-    rp.beta = tp.beta;
+    rp.gamma = r->tissue.params.gamma;
+    rp.beta = r->tissue.params.beta;
     rp.material.youngs = sp->youngs;
     rp.material.outer_diameter = sp->diameter;
     rp.material.inner_diameter = sp->inner_diameter;
@@ -279,18 +265,16 @@ static int build(Run *r, char *err, int err_sz)
     for (int k = 0; k < 3; k++)
         d1[k] -= dd * d[k];
     if (sp->has_bevel_toward) {
-        const double *b = sp->bevel_toward;
-        d1[0] = b[1] * d[2] - b[2] * d[1];
-        d1[1] = b[2] * d[0] - b[0] * d[2];
-        d1[2] = b[0] * d[1] - b[1] * d[0];
+        const double *bt = sp->bevel_toward;
+        d1[0] = bt[1] * d[2] - bt[2] * d[1];
+        d1[1] = bt[2] * d[0] - bt[0] * d[2];
+        d1[2] = bt[0] * d[1] - bt[1] * d[0];
     }
     double n1 = sqrt(dot3(d1, d1));
     for (int k = 0; k < 3; k++)
         d1[k] /= n1;
-    if (ns_rod_init(&r->rod, x, 4 + np, d1, 2, &rp, err, err_sz)) {
-        ns_mesh_free(&orig);
+    if (ns_rod_init(&r->rod, x, 4 + np, d1, 2, &rp, err, err_sz))
         return -1;
-    }
     r->have_rod = true;
     NsCouplingParams cp = ns_default_coupling_params();
     cp.remesh = 1;
@@ -309,20 +293,47 @@ static int build(Run *r, char *err, int err_sz)
     }
     NsNeedlePath path;
     if (ns_needle_path_init(&path, M, nodes, np, s, err, err_sz) ||
-        ns_coupled_init(&r->c, &r->tissue, &r->rod, &path, &cp, err, err_sz)) {
-        ns_mesh_free(&orig);
+        ns_coupled_init(&r->c, &r->tissue, &r->rod, &path, &cp, err, err_sz))
         return -1;
-    }
     r->have_c = true;
-    /* The nodes the track moved go back when the needle leaves (sim/remesh.h). */
-    for (int i = 0; i < orig.node_slots; i++)
-        if (ns_mesh_node_alive(&orig, i) && memcmp(orig.u + 3 * i, M->u + 3 * i, 24) != 0 &&
-            ns_remesh_record_original(&r->c.remesh, i, orig.u + 3 * i)) {
+    const NsMesh *O = &r->orig;
+    for (int i = 0; i < O->node_slots; i++)
+        if (ns_mesh_node_alive(O, i) && memcmp(O->u + 3 * i, M->u + 3 * i, 24) != 0 &&
+            ns_remesh_record_original(&r->c.remesh, i, O->u + 3 * i)) {
             ns_set_err(err, err_sz, "out of memory");
-            ns_mesh_free(&orig);
             return -1;
         }
-    ns_mesh_free(&orig);
+    r->exited = 0;
+    return 0;
+}
+
+/* The tissue (its mesh kept as the original, which every needle's exit restores), the first
+ * needle, and the look-up hints. */
+static int build(Run *r, char *err, int err_sz)
+{
+    NsScenario *sc = &r->sc;
+    NsRunSpec *sp = &r->spec;
+    if (sc->region_count > NS_COUPLING_MAX_REGIONS) {
+        ns_set_err(err, err_sz, "%s: the tissue has %d regions; the coupling takes at most %d",
+                   sc->tissue_where, sc->region_count, NS_COUPLING_MAX_REGIONS);
+        return -1;
+    }
+    if (ns_mesh_copy(&r->orig, &sc->mesh)) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    r->have_orig = true;
+    NsTissueParams tp = ns_default_tissue_params();
+    tp.gamma = 0.55; /* slightly dissipative Newmark, as the validation's coupled cases */
+    tp.beta = 0.25 * 1.05 * 1.05;
+    tp.threads = r->opt.threads;
+    if (ns_scenario_tissue(sc, &tp, &r->tissue, err, err_sz))
+        return -1;
+    r->have_tissue = true;
+    char what[600];
+    snprintf(what, sizeof what, "%s: ns.scenario: entry", sc->where);
+    if (place_needle(r, what, err, err_sz))
+        return -1;
     r->target_hint = malloc((size_t)(sp->target_count + 1) * sizeof *r->target_hint);
     r->marker_hint = malloc((size_t)(sp->marker_count + 1) * sizeof *r->marker_hint);
     r->obst = calloc((size_t)sp->obstacle_count + 1, sizeof *r->obst);
@@ -335,6 +346,35 @@ static int build(Run *r, char *err, int err_sz)
     }
     for (int i = 0; i < sp->target_count; i++)
         r->target_hint[i] = -1;
+    return 0;
+}
+
+/* act.next_needle: the needle, out of the tissue, is replaced by a new one at another entry
+ * (the next hole of a brachytherapy template). The tissue keeps its state; its mesh is the
+ * original one again since the last needle left (Algorithm 2's undo stack). */
+static int next_needle(Run *r, const NsEntry *e, double t, char *err, int err_sz)
+{
+    if (!r->c.outside) {
+        ns_set_err(err, err_sz,
+                   "%s: act.next_needle at t = %.3f s: the needle is still in the tissue (retract "
+                   "it all the way first)",
+                   r->sc.path, t);
+        return -1;
+    }
+    ns_coupled_free(&r->c);
+    r->have_c = false;
+    ns_rod_free(&r->rod);
+    r->have_rod = false;
+    memcpy(r->spec.entry_point, e->point, sizeof e->point);
+    memcpy(r->spec.entry_dir, e->direction, sizeof e->direction);
+    r->spec.has_bevel_toward = e->has_bevel_toward;
+    memcpy(r->spec.bevel_toward, e->bevel_toward, sizeof e->bevel_toward);
+    char what[600];
+    snprintf(what, sizeof what, "%s: act.next_needle at t = %.3f s", r->sc.path, t);
+    if (place_needle(r, what, err, err_sz))
+        return -1;
+    r->needles++;
+    memcpy(r->last_tip, tip_of(r), sizeof r->last_tip);
     return 0;
 }
 
@@ -374,7 +414,8 @@ typedef struct TickIO {
     Run *r;
     double t;
     int exited;
-    int more, drop; /* out */
+    int more;      /* out: the script has more to do */
+    NsControl ctl; /* out: the controls for this step */
 } TickIO;
 
 /* (io) -> (): makes `sim`, loads needlesim.actions through the runtime's own require (kept in
@@ -532,7 +573,7 @@ static int tick_body(lua_State *L)
         lua_call(L, 1, 0);
     }
     static const char *const keys[2] = {"v_insert", "twist_rate"};
-    double *dst[2] = {&r->rod.v_insert, &r->rod.twist_rate};
+    double *dst[2] = {&io->ctl.v_insert, &io->ctl.twist_rate};
     for (int k = 0; k < 2; k++) {
         int ty = get_raw(L, ci, keys[k]);
         double v = lua_tonumber(L, -1);
@@ -561,10 +602,38 @@ static int tick_body(lua_State *L)
                           "%s: sim.control.base_velocity must be {vx, vy, vz}: 3 finite "
                           "numbers [m/s] or nil",
                           r->sc.path);
-    memcpy(r->rod.v_base, vb, sizeof vb);
+    memcpy(io->ctl.v_base, vb, sizeof vb);
     lua_pop(L, 1);
+    /* act.next_needle{} leaves the new entry, checked by the action: {point, direction,
+     * bevel_toward or nil}, one-shot */
+    if (get_raw(L, ci, "next_needle") == LUA_TTABLE) {
+        int ni = lua_gettop(L);
+        NsEntry *e = &io->ctl.entry;
+        static const char *const keys3[3] = {"point", "direction", "bevel_toward"};
+        double *dst3[3] = {e->point, e->direction, e->bevel_toward};
+        for (int k = 0; k < 3; k++) {
+            int ty = get_raw(L, ni, keys3[k]);
+            if (k == 2)
+                e->has_bevel_toward = ty == LUA_TTABLE;
+            for (int i = 0; ty == LUA_TTABLE && i < 3; i++) {
+                lua_rawgeti(L, -1 - i, i + 1);
+                dst3[k][i] = lua_tonumber(L, -1);
+            }
+            if (ty == LUA_TTABLE)
+                lua_pop(L, 3);
+            lua_pop(L, 1);
+            if (k < 2 && ty != LUA_TTABLE)
+                return luaL_error(L, "%s: sim.control.next_needle.%s must be {x, y, z}", r->sc.path,
+                                  keys3[k]);
+        }
+        io->ctl.next_needle = 1;
+    }
+    lua_pop(L, 1);
+    lua_pushstring(L, "next_needle");
+    lua_pushnil(L);
+    lua_rawset(L, ci);
     /* act.drop_seed{} raises a one-shot flag */
-    io->drop = get_raw(L, ci, "drop_seed") != LUA_TNIL && lua_toboolean(L, -1);
+    io->ctl.drop_seed = get_raw(L, ci, "drop_seed") != LUA_TNIL && lua_toboolean(L, -1);
     lua_pop(L, 1);
     lua_pushstring(L, "drop_seed");
     lua_pushnil(L);
@@ -572,8 +641,9 @@ static int tick_body(lua_State *L)
     return 0;
 }
 
-/* One step of the script side. *more: the script has more to do; *drop: it asked for a seed. */
-static int script_tick(Run *r, double t, int exited, int *more, int *drop, char *err, int err_sz)
+/* One step of the script side. *more: the script has more to do; *ctl: the controls. */
+static int script_tick(Run *r, double t, int exited, int *more, NsControl *ctl, char *err,
+                       int err_sz)
 {
     lua_State *L = ns_lua_state(r->sc.lua);
     TickIO io = {.r = r, .t = t, .exited = exited};
@@ -581,7 +651,7 @@ static int script_tick(Run *r, double t, int exited, int *more, int *drop, char 
     lua_pushlightuserdata(L, &io);
     int rc = ns_lua_call(r->sc.lua, 1, 0, err, err_sz);
     *more = io.more;
-    *drop = io.drop;
+    *ctl = io.ctl;
     return rc;
 }
 
@@ -1137,7 +1207,8 @@ static int run_loop(Run *r, char *err, int err_sz)
     }
     memcpy(r->last_tip, tip_of(r), sizeof r->last_tip);
     bool tty = !r->opt.quiet && isatty(fileno(stderr));
-    int exited = 0, more = 1;
+    int more = 1;
+    r->needles = 1;
     double t0 = now_s();
     while (max_steps > 0 ? r->steps < max_steps : more) {
         if (max_steps == 0 && r->steps >= hard_cap) {
@@ -1148,7 +1219,8 @@ static int run_loop(Run *r, char *err, int err_sz)
             return -1;
         }
         double t = (double)r->steps * sp->dt;
-        int drop = 0;
+        NsControl ctl;
+        memset(&ctl, 0, sizeof ctl);
         if (r->opt.replay) { /* the log drives the needle instead of the script */
             more = r->steps < r->replay.n;
             if (!more && max_steps > 0) {
@@ -1156,27 +1228,22 @@ static int run_loop(Run *r, char *err, int err_sz)
                            r->opt.replay, r->replay.n, max_steps);
                 return -1;
             }
-            if (more) {
-                const NsControl *c = &r->replay.rows[r->steps];
-                r->rod.v_insert = c->v_insert;
-                memcpy(r->rod.v_base, c->v_base, sizeof c->v_base);
-                r->rod.twist_rate = c->twist_rate;
-                drop = c->drop_seed;
-            }
-        } else if (script_tick(r, t, exited, &more, &drop, err, err_sz)) {
+            if (more)
+                ctl = r->replay.rows[r->steps];
+        } else if (script_tick(r, t, r->exited, &more, &ctl, err, err_sz)) {
             return -1;
         }
         /* The script ended at this tick: nothing of it is applied, recorded or stepped. */
         if ((max_steps == 0 || r->stop_when_done) && !more)
             break;
-        if (r->rec) {
-            NsControl c = {r->rod.v_insert,
-                           {r->rod.v_base[0], r->rod.v_base[1], r->rod.v_base[2]},
-                           r->rod.twist_rate,
-                           drop};
-            ns_control_log_write_row(r->rec, t, &c);
-        }
-        if (drop && release_seed(r, t, err, err_sz))
+        if (r->rec)
+            ns_control_log_write_row(r->rec, t, &ctl);
+        if (ctl.next_needle && next_needle(r, &ctl.entry, t, err, err_sz))
+            return -1;
+        r->rod.v_insert = ctl.v_insert;
+        memcpy(r->rod.v_base, ctl.v_base, sizeof ctl.v_base);
+        r->rod.twist_rate = ctl.twist_rate;
+        if (ctl.drop_seed && release_seed(r, t, err, err_sz))
             return -1;
         if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
             r->insertions++;
@@ -1203,7 +1270,7 @@ static int run_loop(Run *r, char *err, int err_sz)
             return -1;
         }
         r->steps++;
-        exited |= st.exited;
+        r->exited |= st.exited;
         r->inverted += st.inverted;
         r->unconverged += st.unconverged;
         r->consistent += st.consistent != 0;
@@ -1240,7 +1307,7 @@ static int run_loop(Run *r, char *err, int err_sz)
         }
         if (r->traj)
             fputc('\n', r->traj);
-        check_obstacles(r, (double)r->steps * sp->dt, exited);
+        check_obstacles(r, (double)r->steps * sp->dt, r->exited);
         if (tty && (r->steps % 10 == 0)) {
             progress(r, max_steps, (double)r->steps * sp->dt);
             r->progress_shown = true;
@@ -1269,6 +1336,8 @@ static void run_free(Run *r)
         ns_rod_free(&r->rod);
     if (r->have_tissue)
         ns_tissue_free(&r->tissue);
+    if (r->have_orig)
+        ns_mesh_free(&r->orig);
     if (r->have_spec)
         ns_run_spec_free(&r->spec);
     if (r->have_sc)

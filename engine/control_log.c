@@ -24,8 +24,52 @@ void ns_control_log_write_header(FILE *f, const char *const *sets, int nsets)
 
 void ns_control_log_write_row(FILE *f, double t, const NsControl *c)
 {
-    fprintf(f, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s\n", t, c->v_insert, c->v_base[0],
-            c->v_base[1], c->v_base[2], c->twist_rate, c->drop_seed ? "drop_seed" : "");
+    fprintf(f, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,", t, c->v_insert, c->v_base[0], c->v_base[1],
+            c->v_base[2], c->twist_rate);
+    if (c->next_needle) {
+        const NsEntry *e = &c->entry;
+        fprintf(f, "next_needle:%.17g;%.17g;%.17g;%.17g;%.17g;%.17g", e->point[0], e->point[1],
+                e->point[2], e->direction[0], e->direction[1], e->direction[2]);
+        if (e->has_bevel_toward)
+            fprintf(f, ";%.17g;%.17g;%.17g", e->bevel_toward[0], e->bevel_toward[1],
+                    e->bevel_toward[2]);
+    } else if (c->drop_seed) {
+        fputs("drop_seed", f);
+    }
+    fputc('\n', f);
+}
+
+/* "px;py;pz;dx;dy;dz[;bx;by;bz]" into e; 0 or -1. */
+static int parse_entry(char *s, NsEntry *e)
+{
+    double v[9];
+    int n = 0;
+    for (char *tok = s; tok && n < 10;) {
+        char *semi = strchr(tok, ';');
+        if (semi)
+            *semi = '\0';
+        char *end;
+        size_t len = strlen(tok);
+        if (n == 9 || len == 0 || strspn(tok, "0123456789+-.eE") != len)
+            return -1;
+        v[n] = strtod(tok, &end);
+        if (*end || !isfinite(v[n]))
+            return -1;
+        n++;
+        tok = semi ? semi + 1 : NULL;
+    }
+    if (n != 6 && n != 9)
+        return -1;
+    memset(e, 0, sizeof *e);
+    memcpy(e->point, v, sizeof e->point);
+    memcpy(e->direction, v + 3, sizeof e->direction);
+    if (n == 9) {
+        memcpy(e->bevel_toward, v + 6, sizeof e->bevel_toward);
+        e->has_bevel_toward = 1;
+    }
+    double dl = sqrt(e->direction[0] * e->direction[0] + e->direction[1] * e->direction[1] +
+                     e->direction[2] * e->direction[2]);
+    return dl > 0.0 ? 0 : -1;
 }
 
 /* Strips a trailing "\n" and "\r". */
@@ -142,12 +186,25 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
             rc = -1;
             break;
         }
-        int drop = 0;
-        if (strcmp(field[6], "drop_seed") == 0)
+        int drop = 0, next = 0;
+        NsEntry entry;
+        memset(&entry, 0, sizeof entry);
+        if (strcmp(field[6], "drop_seed") == 0) {
             drop = 1;
-        else if (field[6][0] != '\0') {
-            ns_set_err(err, err_sz, "%s:%ld: unknown event '%s' (known: drop_seed, or empty)", path,
-                       lineno, field[6]);
+        } else if (strncmp(field[6], "next_needle:", 12) == 0) {
+            next = 1;
+            if (parse_entry(field[6] + 12, &entry)) {
+                ns_set_err(err, err_sz,
+                           "%s:%ld: next_needle: expected px;py;pz;dx;dy;dz[;bx;by;bz] (finite "
+                           "numbers, the direction not zero)",
+                           path, lineno);
+                rc = -1;
+                break;
+            }
+        } else if (field[6][0] != '\0') {
+            ns_set_err(err, err_sz,
+                       "%s:%ld: unknown event '%s' (known: drop_seed, next_needle:..., or empty)",
+                       path, lineno, field[6]);
             rc = -1;
             break;
         }
@@ -166,6 +223,8 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
         memcpy(c->v_base, v + 2, sizeof c->v_base);
         c->twist_rate = v[5];
         c->drop_seed = drop;
+        c->next_needle = next;
+        c->entry = entry;
     }
     if (rc == 0 && ferror(f)) {
         ns_set_err(err, err_sz, "%s: read error", path);

@@ -24,12 +24,12 @@
 -- as in the paper (§3.3) they are membranes that raise the cutting force where the needle
 -- crosses the region's surface (see the materials' `membrane` field), not separate regions.
 --
--- The run (needlesim run scenarios/brachytherapy.lua): one needle through the template hole at
--- x = +8 mm, y = -4 mm (left of the urethra, above the rectum) into the prostate, two seeds
--- left on the way back at the planned depths, then the needle out. A flexible bevel-tip needle
--- by default, spun as it goes in so that its bevel does not steer it off the line (the paper's
--- ProsFB; ns.needle{kind = "stiff"} is its ProsSS). The urethra, rectum and pubic arch are
--- obstacles; each one entered costs 25 points.
+-- The run (needlesim run scenarios/brachytherapy.lua): two needles, one after the other, through
+-- the template holes at x = +8 and -10 mm, y = -4 mm (either side of the urethra, above the
+-- rectum) into the prostate; on the way back each leaves two seeds at the planned depths, then
+-- comes all the way out. A flexible bevel-tip needle by default, spun as it goes in so that its
+-- bevel does not steer it off the line (the paper's ProsFB; `--set needle.kind=stiff` is its
+-- ProsSS). The urethra, rectum and pubic arch are obstacles; each one entered costs 25 points.
 local ns = require "needlesim"
 local act = require "needlesim.actions"
 local M = ns.materials
@@ -59,9 +59,20 @@ local pubic_arch = shape.union(
   shape.capsule { a = { -0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 },
   shape.capsule { a = { 0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 })
 
--- The template hole and the planned seeds (depth from the skin along the needle) [m].
-local hole = { 0.008, -0.004 }
+-- The template holes (x, y on the perineum) and the planned seed depths from the skin [m]. The
+-- holes sit where the mesh lets a needle's entry track be laid (the puncture of the skin itself
+-- is not modelled yet: docs/remeshing.md); -8 mm is not such a place on this mesh, -10 mm is.
+local holes = { { 0.008, -0.004 }, { -0.010, -0.004 } }
 local seed_depths = { 0.060, 0.048 }
+
+local targets, seeds = {}, {}
+for i, hole in ipairs(holes) do
+  for k, depth in ipairs(seed_depths) do
+    local name = string.format("%s seed %d", k == 1 and "base" or "mid", i)
+    targets[#targets + 1] = { name = name, at = { hole[1], hole[2], depth }, tolerance = 3e-3 }
+    seeds[#seeds + 1] = { target = name } -- in the order the script drops them
+  end
+end
 
 return ns.scenario {
   name = "prostate brachytherapy",
@@ -69,23 +80,25 @@ return ns.scenario {
   dt = 0.01,
   -- `needlesim run ... --set needle.kind=stiff` runs the stiff symmetric needle (ProsSS).
   needle = ns.needle { kind = ns.param("needle.kind", "flexible"), bevel_deg = 30 },
-  entry = { point = { hole[1], hole[2], 0 }, direction = { 0, 0, 1 } },
-  targets = {
-    { name = "base seed", at = { hole[1], hole[2], seed_depths[1] }, tolerance = 3e-3 },
-    { name = "mid seed", at = { hole[1], hole[2], seed_depths[2] }, tolerance = 3e-3 },
-  },
-  seeds = { { target = "base seed" }, { target = "mid seed" } },
+  entry = { point = { holes[1][1], holes[1][2], 0 }, direction = { 0, 0, 1 } },
+  targets = targets,
+  seeds = seeds,
   obstacles = {
     { name = "urethra", region = "urethra" },
     { name = "rectum", region = "rectum" },
     { name = "pubic arch", region = "pubic_arch" },
   },
   script = function()
-    act.insert { speed = 0.02, depth = seed_depths[1], spin = 2 * math.pi } -- 20 mm/s, 1 turn/s
-    act.drop_seed {}
-    act.retract { speed = 0.02, depth = seed_depths[2] }
-    act.drop_seed {}
-    act.retract { speed = 0.02 } -- out
+    for i, hole in ipairs(holes) do
+      if i > 1 then
+        act.next_needle { point = { hole[1], hole[2], 0 }, direction = { 0, 0, 1 } }
+      end
+      act.insert { speed = 0.02, depth = seed_depths[1], spin = 2 * math.pi } -- 20 mm/s, 1 turn/s
+      act.drop_seed {}
+      act.retract { speed = 0.02, depth = seed_depths[2] }
+      act.drop_seed {}
+      act.retract { speed = 0.02 } -- all the way out
+    end
     act.wait { time = 0.2 } -- the tissue settles around the seeds
   end,
   tissue = ns.tissue.shapes {

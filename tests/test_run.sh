@@ -49,7 +49,7 @@ import json, math, sys
 r = json.load(open(sys.argv[1]))
 exec(open(sys.argv[2]).read())
 finite(r, "report")
-assert len(r["seeds"]) == 2 == r["seeds_planned"], r["seeds"]
+assert len(r["seeds"]) == 4 == r["seeds_planned"], r["seeds"]  # two needles, two seeds each
 hits = [t["name"] for t in r["targets"] if t["hit"]]
 assert hits, "no target hit: " + ", ".join("%s %.2f mm" % (t["name"], t["error_mm"]) for t in r["targets"])
 bad = [o["name"] for o in r["obstacles"] if o["violated"]]
@@ -186,6 +186,7 @@ bad_log log_bad_number '5s/^\([^,]*\),[^,]*,/\1,fast,/' "log_bad_number.csv:5: v
 bad_log log_short_row '7s/,[^,]*$//' "log_short_row.csv:7: expected 7 comma-separated fields"
 bad_log log_bad_time '9s/^[^,]*,/0.5,/' "log_bad_time.csv:9: t_s is 0.5 but row 8"
 bad_log log_bad_event '4s/,$/,explode/' "log_bad_event.csv:4: unknown event 'explode'"
+bad_log log_bad_needle '6s/,$/,next_needle:0;0;0;0;0;0/' "log_bad_needle.csv:6: next_needle: expected px;py;pz;dx;dy;dz"
 bad_log log_bad_header '1s/t_s/time/' "log_bad_header.csv:1: the header must be"
 
 # Bad input: exit 1, one line naming the file and line or field, no report.json.
@@ -230,6 +231,8 @@ bad_running control_nan 's/^    script = function()$/    on_tick = function(sim)
     "sim.control.v_insert must be a finite number"
 bad_running error_table 's/act.wait { time = 0.2 }/act.wait { time = 0.2 }; error({})/' \
     "error_table.lua:[0-9]+: error \(not a string\)"
+bad_running needle_still_in 's/act.wait { time = 0.2 }/act.next_needle { point = { 0.005, 0, 0 }, direction = { 0, 0, 1 } }/' \
+    "needle_still_in.lua:[0-9]+: act.next_needle: the needle is still in the tissue"
 bad_running too_deep 's/depth = 0.03 }/depth = 0.3 }/' \
     "too_deep.lua(:[0-9]+: act.insert: the needle does not advance|: step [0-9]+ .*failed)"
 
@@ -274,6 +277,28 @@ if [ $rc = 1 ] && grep -q "cannot create output folder" "$TMP/err_dir"; then
 else
     fail "unwritable output folder" "exit $rc: $(head -1 "$TMP/err_dir")"
 fi
+
+# Two needles, one after the other (act.next_needle), recorded and replayed into a copy without
+# its script: the same state (the log carries the new entry).
+sed 's/act.wait { time = 0.2 }/act.retract { speed = 0.04 }; act.next_needle { point = { 0.01, 0, 0 }, direction = { 0, 0, 1 } }; act.insert { speed = 0.04, depth = 0.02 }/' \
+    "$TUT" >"$TMP/two_needles.lua"
+sed '/^    script = function()$/,/^    end,$/d' "$TMP/two_needles.lua" >"$TMP/two_needles_noscript.lua"
+"$BIN" run "$TMP/two_needles.lua" -o "$TMP/tn1" --record "$TMP/tn.csv" --quiet >/dev/null 2>"$TMP/err_tn1"
+rc=$?
+"$BIN" run "$TMP/two_needles_noscript.lua" -o "$TMP/tn2" --replay "$TMP/tn.csv" --quiet >/dev/null 2>"$TMP/err_tn2"
+if [ $rc = 0 ] && grep -q "next_needle:0.01" "$TMP/tn.csv" && python3 - "$TMP/tn1/report.json" <<'PY' 2>"$TMP/py_tn"; then
+import json, sys
+r = json.load(open(sys.argv[1]))
+x, y, z = r["needle"]["tip_m"]
+assert abs(x - 0.01) < 1e-3 and r["needle"]["depth_m"] > 0.015, r["needle"]
+assert r["score"]["insertions"] == 2, r["score"]
+PY
+    pass "act.next_needle: the second needle goes in at its own entry"
+else
+    fail "next_needle" "exit $rc: $(head -1 "$TMP/err_tn1") $(tail -1 "$TMP/py_tn" 2>/dev/null)"
+fi
+same_run "two needles recorded, replayed without the script: same state hash and score" \
+    "$TMP/tn1/report.json" "$TMP/tn2/report.json"
 
 # A twist and a retraction out of the tissue, into a nested output folder that does not exist.
 sed 's/act.wait { time = 0.2 }/act.twist { angle = math.pi \/ 2, rate = math.pi }; act.retract { speed = 0.04 }/' \

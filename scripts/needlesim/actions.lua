@@ -180,6 +180,51 @@ function act.move_base(t)
     sim.control.base_velocity = nil
 end
 
+local function vec3(t, name, k, optional)
+    local v = t[k]
+    if v == nil and optional then
+        return nil
+    end
+    if type(v) ~= "table" or #v ~= 3 or not (finite(v[1]) and finite(v[2]) and finite(v[3])) then
+        error(fmt("act.%s: %s must be {x, y, z}: 3 finite numbers (got %s)", name, k,
+            tostring(v)), 3)
+    end
+    return { v[1], v[2], v[3] }
+end
+
+--- act.next_needle{point, direction, bevel_toward}: the needle, withdrawn all the way, is
+-- replaced by a new one of the same kind entering at `point` along `direction` (the next hole
+-- of a template; fields as the scenario's `entry`). The tissue keeps its state, and the seeds
+-- already released stay where they are. Takes one step.
+function act.next_needle(t)
+    running()
+    fields(t, "next_needle", { "point", "direction", "bevel_toward" })
+    local p = vec3(t, "next_needle", "point")
+    local d = vec3(t, "next_needle", "direction")
+    local b = vec3(t, "next_needle", "bevel_toward", true)
+    local len = math.sqrt(d[1] * d[1] + d[2] * d[2] + d[3] * d[3])
+    if len == 0 then
+        error("act.next_needle: direction must not be zero", 2)
+    end
+    d = { d[1] / len, d[2] / len, d[3] / len }
+    if b then
+        local bd = b[1] * d[1] + b[2] * d[2] + b[3] * d[3]
+        b = { b[1] - bd * d[1], b[2] - bd * d[2], b[3] - bd * d[3] }
+        local lb = math.sqrt(b[1] * b[1] + b[2] * b[2] + b[3] * b[3])
+        if lb == 0 then
+            error("act.next_needle: bevel_toward must not be parallel to direction", 2)
+        end
+        b = { b[1] / lb, b[2] / lb, b[3] / lb }
+    end
+    if not sim.exited then
+        error("act.next_needle: the needle is still in the tissue (act.retract{speed = ...} "
+            .. "without a depth takes it all the way out first)", 2)
+    end
+    stop()
+    sim.control.next_needle = { point = p, direction = d, bevel_toward = b }
+    tick()
+end
+
 --- act.drop_seed{}: release a seed at the needle tip (brachytherapy). It stays in the tissue
 -- where it was released and moves with it; the i-th seed released is scored against the
 -- scenario's i-th planned seed's target (`seeds`), later ones against the nearest target.
