@@ -494,10 +494,39 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         if (ns_mesh_locate(M, u_new, t, 1e-9, NULL) < 0)
             return -1;
     }
-    /* The chain, tip first. */
+    /* Sub-stepping (§3.4.1: Algorithm 2 presumes the tip moves less than about an element in a
+     * step): a move of more than half the mean length of the tip node's edges is cut into
+     * equal pieces along the straight line to u_new, each remeshed in turn. */
+    double u0[3], du[3], hsum = 0.0;
+    int hn = 0;
+    memcpy(u0, M->u + 3 * tipn, sizeof u0);
+    for (int i = 0; i < 3; i++)
+        du[i] = u_new[i] - u0[i];
+    const NsIntList *lt = &M->node_tets[tipn];
+    for (int j = 0; j < lt->count; j++)
+        for (int k = 0; k < 4; k++) {
+            int o = M->tet_node[4 * lt->items[j] + k];
+            if (o == tipn)
+                continue;
+            double e[3];
+            for (int i = 0; i < 3; i++)
+                e[i] = M->u[3 * o + i] - u0[i];
+            hsum += norm3(e);
+            hn++;
+        }
+    double half = hn ? 0.5 * hsum / hn : INFINITY, dist = norm3(du);
+    int K = dist > half ? (int)ceil(dist / half) : 1;
+    if (K > 64) {
+        snprintf(c->error, sizeof c->error,
+                 "the tip moved %.3g m in one step, more than 32 elements: take smaller steps",
+                 dist);
+        return -1;
+    }
+    st->remesh_substeps = K;
+    /* The chain, tip first (it may grow by one node per sub-step). */
     int len = p->count;
-    if (p->count + 2 > c->path_cap) {
-        int cap = 2 * (p->count + 2);
+    if (p->count + K + 2 > c->path_cap) {
+        int cap = 2 * (p->count + K + 2);
         int *nd = realloc(p->node, (size_t)cap * sizeof *nd);
         if (!nd)
             return -1;
@@ -508,25 +537,30 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         p->s = sv;
         c->path_cap = cap;
     }
-    int *chain = malloc((size_t)(len + 2) * sizeof *chain);
+    int *chain = malloc((size_t)(len + K + 2) * sizeof *chain);
     if (!chain)
         return -1;
     for (int k = 0; k < len; k++)
         chain[k] = p->node[len - 1 - k];
-    NsRemeshTip tip = {chain[0], chain[1], len > 2 ? chain[2] : -1,
-                       chain,    len,      c->state[r->nodes - 1] == NS_FRICTION_DYN_POS,
-                       false,    t};
+    int penetrating = c->state[r->nodes - 1] == NS_FRICTION_DYN_POS, hint = t, rc = 0;
     NsRemeshResult res;
+    memset(&res, 0, sizeof res);
     char err[256];
-    int rc = ns_remesh_tip(M, &c->remesh, &tip, u_new, &res, err, sizeof err);
-    if (rc != 0) {
-        snprintf(c->error, sizeof c->error, "%s", err);
-        /* Scoring may have grown the mesh's slots even though nothing was accepted: the
-         * tissue's arrays must follow before it is touched again. */
-        char err2[256];
-        ns_tissue_sync_topology(T, err2, sizeof err2);
-    }
-    if (rc == 0) {
+    for (int sub = 1; sub <= K && rc == 0; sub++) {
+        double us[3];
+        for (int i = 0; i < 3; i++)
+            us[i] = sub == K ? u_new[i] : u0[i] + du[i] * sub / K;
+        NsRemeshTip tip = {chain[0], chain[1], len > 2 ? chain[2] : -1, chain, len, penetrating,
+                           false,    hint};
+        rc = ns_remesh_tip(M, &c->remesh, &tip, us, &res, err, sizeof err);
+        if (rc != 0) {
+            snprintf(c->error, sizeof c->error, "%s", err);
+            /* Scoring may have grown the mesh's slots even though nothing was accepted: the
+             * tissue's arrays must follow before it is touched again. */
+            char err2[256];
+            ns_tissue_sync_topology(T, err2, sizeof err2);
+            break;
+        }
         if (res.dropped) {
             chain[0] = res.tip;
             if (len > 2 && chain[1] == res.tip) {
@@ -538,6 +572,10 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
             chain[0] = res.tip;
             len++;
         }
+        hint = tip.hint_tet;
+        st->cutting |= res.kind != NS_REMESH_NONE && penetrating;
+    }
+    if (rc == 0) {
         p->count = len;
         for (int k = 0; k < len; k++)
             p->node[k] = chain[len - 1 - k];
@@ -549,7 +587,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
             p->s[k] = p->s[k - 1] + norm3(d);
         }
         p->tip_s = p->s[len - 1];
-        c->remesh_hint = tip.hint_tet;
+        c->remesh_hint = hint;
         st->remesh_kind = res.kind;
         st->remesh_undone = res.undone;
         st->remesh_candidates = res.candidates;
@@ -559,7 +597,6 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         if (bevel)
             memcpy(M->x + 3 * res.tip, r->x + 3 * (r->nodes - 1), 3 * sizeof(double));
         rc = ns_tissue_sync_topology(T, err, sizeof err);
-        st->cutting = res.kind != NS_REMESH_NONE && tip.penetrating;
     }
     free(chain);
     return rc;

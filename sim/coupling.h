@@ -125,9 +125,10 @@ typedef struct NsCouplingStats {
      * the stack was undone first, candidates scored, and the worst and largest dihedral angle
      * of the tets around the needle's last three tissue nodes after it [deg] */
     int remesh_kind, remesh_undone, remesh_candidates;
-    int exited;      /* remesh: the needle was withdrawn out of the tissue this step */
-    int exit_undone; /* ... and the splits the exit had to undo beyond the one that made
-                        the tip's node (0 when Algorithm 2 undid the rest on the way out) */
+    int remesh_substeps; /* pieces the tip's move was cut into (§3.4.1; 1 = none, 0 = no remesh) */
+    int exited;          /* remesh: the needle was withdrawn out of the tissue this step */
+    int exit_undone;     /* ... and the splits the exit had to undo beyond the one that made
+                            the tip's node (0 when Algorithm 2 undid the rest on the way out) */
     double min_dihedral_deg, max_dihedral_deg;
 } NsCouplingStats;
 

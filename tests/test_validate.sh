@@ -3,11 +3,14 @@
 # the JSON has the contract's keys, and bad arguments are usage errors (exit 2) before anything
 # runs.
 #
-# usage: tests/test_validate.sh NEEDLESIM_BINARY
+# usage: tests/test_validate.sh NEEDLESIM_BINARY [1|2]
+# With a group, only that half of the cases runs (meson runs the halves as two tests, side by
+# side on two cores); the checks of the command itself run with group 1. Without, all of it.
 # Prints one line per check; exits 0 only if every check passes.
 set -u
 
-BIN=${1:?usage: test_validate.sh NEEDLESIM_BINARY}
+BIN=${1:?usage: test_validate.sh NEEDLESIM_BINARY [1|2]}
+GROUP=${2:-all}
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-validate.XXXXXX") || exit 1
 trap 'rm -rf "$TMP"' EXIT
 PASSED=0
@@ -23,9 +26,16 @@ fail() {
     FAILED=$((FAILED + 1))
 }
 
-CASES="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy
+GROUP1="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy
 rod-cantilever rod-buckling rod-twist rod-length rod-reparam friction-stick friction-slip
-friction-reversal puncture solver-agreement symmetric-straight remesh-restore bevel-arc"
+friction-reversal puncture solver-agreement"
+GROUP2="symmetric-straight remesh-restore bevel-arc remesh-substeps"
+ALL="$GROUP1 $GROUP2"
+case "$GROUP" in
+1) CASES=$GROUP1 ;;
+2) CASES=$GROUP2 ;;
+*) CASES=$ALL ;;
+esac
 # Cases whose bar is not met yet (issue 6 stays open; docs/remeshing.md gives the figures):
 # listed by --list and runnable, not required to pass here. Not a way to hide a failure: a case
 # moves up to CASES when it passes.
@@ -69,6 +79,12 @@ if command -v python3 >/dev/null; then
     fi
 fi
 
+if [ "$GROUP" = 2 ]; then # the command's own checks run with group 1
+    echo "$PASSED passed, $FAILED failed"
+    [ "$FAILED" = 0 ]
+    exit
+fi
+
 # One case, as a table.
 "$BIN" validate fem-compression >"$TMP/out.txt" 2>"$TMP/err"
 rc=$?
@@ -82,9 +98,9 @@ fi
 # --list names every case.
 "$BIN" validate --list >"$TMP/list" 2>&1
 ok=1
-for c in $CASES $NOT_MET $SEPARATE; do grep -q "^$c " "$TMP/list" || ok=0; done
+for c in $ALL $NOT_MET $SEPARATE; do grep -q "^$c " "$TMP/list" || ok=0; done
 # ... and no case is left out of the lists (a new case must be run or named as not met).
-[ "$(grep -c '^[a-z]' "$TMP/list")" = "$(echo $CASES $NOT_MET $SEPARATE | wc -w)" ] || ok=0
+[ "$(grep -c '^[a-z]' "$TMP/list")" = "$(echo $ALL $NOT_MET $SEPARATE | wc -w)" ] || ok=0
 if [ $ok = 1 ]; then pass "--list"; else fail "--list" "$(cat "$TMP/list")"; fi
 
 # Usage errors: exit 2, nothing run.
