@@ -211,19 +211,27 @@ static Insertion default_insertion(void)
     return in;
 }
 
+/* The worst distance of the tip from the insertion line (along x through the entry offset)
+ * over the run [m], and how far the tip advanced along x into *advanced. */
+static double lateral_worst(const Insertion *in, const Run *run, double *advanced)
+{
+    double worst = 0.0;
+    for (int k = 0; k < run->steps; k++) {
+        const double *p = run->tip + 3 * k;
+        worst = fmax(worst, hypot(p[1] - in->offset[0], p[2] - in->offset[1]));
+    }
+    *advanced = run->tip[3 * (run->steps - 1)] - run->tip[0];
+    return worst;
+}
+
 static int symmetric_straight(NsValidateResult *r)
 {
     Insertion in = default_insertion();
     Run run;
     int rc = insert(&in, &run, r);
     if (rc == 0) {
-        double worst = 0.0;
-        for (int k = 0; k < run.steps; k++) {
-            const double *p = run.tip + 3 * k;
-            worst = fmax(worst, hypot(p[1] - in.offset[0], p[2] - in.offset[1]));
-        }
+        double advanced, worst = lateral_worst(&in, &run, &advanced);
         const double *end = run.tip + 3 * (run.steps - 1);
-        double advanced = end[0] - run.tip[0];
         int ops = run.ops[1] + run.ops[2] + run.ops[3] + run.ops[4];
         snprintf(r->metric, sizeof r->metric, "lateral tip deviation [m]");
         r->value = worst;
@@ -260,13 +268,7 @@ static int remesh_substeps(NsValidateResult *r)
     Run run;
     int rc = insert(&in, &run, r);
     if (rc == 0) {
-        double worst = 0.0;
-        for (int k = 0; k < run.steps; k++) {
-            const double *p = run.tip + 3 * k;
-            worst = fmax(worst, hypot(p[1] - in.offset[0], p[2] - in.offset[1]));
-        }
-        const double *end = run.tip + 3 * (run.steps - 1);
-        double advanced = end[0] - run.tip[0];
+        double advanced, worst = lateral_worst(&in, &run, &advanced);
         snprintf(r->metric, sizeof r->metric, "lateral tip deviation [m]");
         r->value = worst;
         r->reference = 0.0;
