@@ -301,35 +301,22 @@ static int remesh_substeps(NsValidateResult *r)
 /* Fits a circle to points p[0 .. n) (3D): the plane through their mean normal to the
  * covariance's weakest direction, then Kasa's algebraic fit in it. Returns the radius, the RMS of
  * the distances to the circle into *rms and the largest distance from the plane into *off. */
+static double path_plane(const double *p, int n, double c[3], double e[9]);
+
 static double fit_circle(const double *p, int n, double *rms, double *off)
 {
-    double c[3] = {0, 0, 0}, C[9] = {0}, V[9];
-    for (int k = 0; k < n; k++)
-        for (int i = 0; i < 3; i++)
-            c[i] += p[3 * k + i] / n;
-    for (int k = 0; k < n; k++)
-        for (int i = 0; i < 3; i++)
-            for (int j = 0; j < 3; j++)
-                C[3 * i + j] += (p[3 * k + i] - c[i]) * (p[3 * k + j] - c[j]);
-    ns_sym3_eigen(C, V);
-    int w = 0; /* the weakest direction: the plane's normal */
-    for (int i = 1; i < 3; i++)
-        if (C[4 * i] < C[4 * w])
-            w = i;
-    int a = (w + 1) % 3, b = (w + 2) % 3;
+    double c[3], e[9]; /* the plane: e[0..5] in it, e[6..8] its normal */
+    *off = path_plane(p, n, c, e);
     /* Kasa: x^2 + y^2 + D x + E y + F = 0 in least squares. */
     double N[9] = {0}, rhs[3] = {0};
-    *off = 0.0;
     for (int k = 0; k < n; k++) {
-        double d[3], x = 0, y = 0, z = 0;
+        double d[3], x = 0, y = 0;
         for (int i = 0; i < 3; i++)
             d[i] = p[3 * k + i] - c[i];
         for (int i = 0; i < 3; i++) {
-            x += d[i] * V[3 * i + a];
-            y += d[i] * V[3 * i + b];
-            z += d[i] * V[3 * i + w];
+            x += d[i] * e[i];
+            y += d[i] * e[3 + i];
         }
-        *off = fmax(*off, fabs(z));
         double row[3] = {x, y, 1.0}, t = -(x * x + y * y);
         for (int i = 0; i < 3; i++) {
             rhs[i] += row[i] * t;
@@ -356,11 +343,11 @@ static double fit_circle(const double *p, int n, double *rms, double *off)
         for (int i = 0; i < 3; i++)
             d[i] = p[3 * k + i] - c[i];
         for (int i = 0; i < 3; i++) {
-            x += d[i] * V[3 * i + a];
-            y += d[i] * V[3 * i + b];
+            x += d[i] * e[i];
+            y += d[i] * e[3 + i];
         }
-        double e = hypot(x - cx, y - cy) - R;
-        ss += e * e;
+        double res = hypot(x - cx, y - cy) - R;
+        ss += res * res;
     }
     *rms = sqrt(ss / n);
     return R;

@@ -80,6 +80,21 @@ local function stop()
     sim.control.twist_rate = 0
 end
 
+-- Watches a depth that should move one way (sign +1 in, -1 out): the returned function, called
+-- after each step, fails at the script's line when the depth has not moved by 0.01 mm that way
+-- for STALL_TIME of simulated time.
+local function stall_watch(message, sign, wanted)
+    local best, since = sim.depth, sim.t
+    return function()
+        if sign * (sim.depth - best) > 1e-5 then
+            best, since = sim.depth, sim.t
+        elseif sim.t - since > STALL_TIME then
+            error(fmt("%s: depth %.1f mm for %g s, %.1f mm wanted", message, 1e3 * sim.depth,
+                STALL_TIME, 1e3 * wanted), 3)
+        end
+    end
+end
+
 --- act.insert{speed, depth, spin}: push the needle in at `speed` [m/s] until its tip is `depth`
 -- [m] past the entry point (measured along the entry direction), the base turning at `spin`
 -- [rad/s] meanwhile (default 0; spinning a bevel needle as it goes in averages its bend away).
@@ -89,17 +104,12 @@ function act.insert(t)
     local speed = number(t, "insert", "speed", GT0, "> 0 [m/s]")
     local depth = number(t, "insert", "depth", GT0, "> 0 [m]")
     local spin = number(t, "insert", "spin", ANY, "[rad/s]", 0)
-    local best, since = sim.depth, sim.t
+    local watch = stall_watch("act.insert: the needle does not advance", 1, depth)
     while sim.depth < depth do
         sim.control.v_insert = speed
         sim.control.twist_rate = spin
         tick()
-        if sim.depth > best + 1e-5 then
-            best, since = sim.depth, sim.t
-        elseif sim.t - since > STALL_TIME then
-            error(fmt("act.insert: the needle does not advance: depth %.1f mm for %g s, %.1f mm "
-                .. "wanted", 1e3 * sim.depth, STALL_TIME, 1e3 * depth), 2)
-        end
+        watch()
     end
     stop()
 end
@@ -114,17 +124,13 @@ function act.retract(t)
     local speed = number(t, "retract", "speed", GT0, "> 0 [m/s]")
     local depth = number(t, "retract", "depth", GE0, ">= 0 [m]", -1)
     local out = depth < 0
-    local best, since = sim.depth, sim.t
+    local watch = stall_watch("act.retract: the needle does not come back", -1,
+        out and -CLEAR or depth)
     while (out and (not sim.exited or sim.depth > -CLEAR)) or (not out and sim.depth > depth
         and not sim.exited) do
         sim.control.v_insert = -speed
         tick()
-        if sim.depth < best - 1e-5 then
-            best, since = sim.depth, sim.t
-        elseif sim.t - since > STALL_TIME then
-            error(fmt("act.retract: the needle does not come back: depth %.1f mm for %g s, %.1f "
-                .. "mm wanted", 1e3 * sim.depth, STALL_TIME, 1e3 * (out and -CLEAR or depth)), 2)
-        end
+        watch()
     end
     stop()
 end
