@@ -1,0 +1,215 @@
+/* render/: the cutaway scene and the GL renderer, checked on pixels (issue 8). A known scene
+ * (a two-region block cut through its middle, a straight needle along x, one target hit and
+ * one missed) is drawn through EGL (llvmpipe here) and the frame is read back: the needle's
+ * colour lies along its projected line, each region's colour fills its part of the cut face,
+ * the hit target is green and the missed one red, and two renders are byte-identical. No
+ * stored image is compared (Mesa versions differ). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "coupling.h"
+#include "frame.h"
+#include "mesh_grid.h"
+#include "ns_test.h"
+#include "scene.h"
+
+typedef struct Block {
+    NsMesh mesh;
+    double rod[12 * 3];
+    uint8_t state[12];
+    double target_x[6], target_r[2];
+    bool hit[2];
+    NsSceneInput in;
+} Block;
+
+/* A 40 x 20 x 20 mm block, region 1 where x > 20 mm; the needle along x through its centre
+ * line from -10 mm to 25 mm, sticking; a hit target ahead of the tip, a missed one below. */
+static int block_init(Block *b)
+{
+    memset(b, 0, sizeof *b);
+    double lo[3] = {0.0, -0.01, -0.01}, hi[3] = {0.04, 0.01, 0.01};
+    char err[256];
+    if (ns_mesh_grid_box(&b->mesh, lo, hi, 8, 4, 4, 0, err, sizeof err)) {
+        fprintf(stderr, "%s\n", err);
+        return -1;
+    }
+    for (int e = 0; e < b->mesh.tet_slots; e++) {
+        double cx = 0.0;
+        for (int k = 0; k < 4; k++)
+            cx += 0.25 * b->mesh.x[3 * b->mesh.tet_node[4 * e + k]];
+        b->mesh.tet_region[e] = cx > 0.02 ? 1 : 0;
+    }
+    for (int k = 0; k < 12; k++) {
+        b->rod[3 * k] = -0.01 + 0.035 * k / 11.0;
+        b->state[k] = NS_FRICTION_STATIC;
+    }
+    double t[6] = {0.032, 0.0, 0.0, 0.012, 0.0, -0.006};
+    memcpy(b->target_x, t, sizeof t);
+    b->target_r[0] = b->target_r[1] = 0.003;
+    b->hit[0] = true;
+    NsSceneInput *in = &b->in;
+    in->mesh = &b->mesh;
+    in->regions = 2;
+    in->rod_x = b->rod;
+    in->rod_nodes = 12;
+    in->rod_radius = 0.4e-3;
+    in->state = b->state;
+    in->held = 2;
+    in->target_x = b->target_x;
+    in->target_r = b->target_r;
+    in->target_hit = b->hit;
+    in->targets = 2;
+    in->axis[0] = 1.0;
+    memcpy(in->bounds, lo, sizeof lo);
+    memcpy(in->bounds + 3, hi, sizeof hi);
+    return 0;
+}
+
+static const uint8_t *pixel(const NsImage *im, const NsCamera *cam, int w, int h, int x0,
+                            const double p[3])
+{
+    double px[2];
+    if (!ns_camera_project(cam, w, h, p, px))
+        return NULL;
+    int x = x0 + (int)floor(px[0]), y = (int)floor(px[1]);
+    if (x < 0 || y < 0 || x >= im->w || y >= im->h)
+        return NULL;
+    return im->rgb + 3 * ((size_t)y * im->w + x);
+}
+
+static int near_rgb(const uint8_t *p, const uint8_t *c, int tol)
+{
+    return p && abs(p[0] - c[0]) <= tol && abs(p[1] - c[1]) <= tol && abs(p[2] - c[2]) <= tol;
+}
+
+/* The scene alone: the side view's plane holds the axis and faces the camera; the cap has a
+ * piece for every tet the plane crosses and lies in the plane. */
+static int scene_cut_in_plane(void)
+{
+    Block b;
+    ENSURE(block_init(&b) == 0);
+    NsScene s;
+    memset(&s, 0, sizeof s);
+    ENSURE(ns_scene_build(&b.in, NS_VIEW_SIDE, 16.0 / 9.0, &s) == 0);
+    double f[3];
+    for (int i = 0; i < 3; i++)
+        f[i] = s.camera.target[i] - s.camera.eye[i];
+    ENSURE_SMALL(s.plane[0], 1e-12);                                         /* holds the x axis */
+    ENSURE(s.plane[0] * f[0] + s.plane[1] * f[1] + s.plane[2] * f[2] < 0.0); /* faces the eye */
+    ENSURE(s.cap.n > 0 && s.cap.n % 3 == 0);
+    for (int k = 0; k < s.cap.n; k++) {
+        const float *p = s.cap.v[k].p;
+        ENSURE_SMALL(s.plane[0] * p[0] + s.plane[1] * p[1] + s.plane[2] * p[2] + s.plane[3], 1e-7);
+    }
+    ENSURE(s.glass.n > 0 && s.solid.n > 0 && s.edges.n == 0); /* tet_edges off */
+    b.in.tet_edges = true;
+    ENSURE(ns_scene_build(&b.in, NS_VIEW_SIDE, 16.0 / 9.0, &s) == 0);
+    ENSURE(s.edges.n > 0 && s.edges.n % 2 == 0);
+    ns_scene_free(&s);
+    ns_mesh_free(&b.mesh);
+    return 0;
+}
+
+static int render_block(Block *b, NsFrame *f, NsImage *im, bool hud)
+{
+    char err[256];
+    int views[1] = {NS_VIEW_SIDE};
+    const char *lines[2] = {"test scene", "t 0.00 s"};
+    if (ns_frame_render(f, &b->in, views, 1, lines, hud ? 2 : 0, false, im, err, sizeof err)) {
+        fprintf(stderr, "%s\n", err);
+        return -1;
+    }
+    return 0;
+}
+
+static int pixels_show_the_scene(void)
+{
+    Block b;
+    ENSURE(block_init(&b) == 0);
+    NsFrame f;
+    char err[256];
+    int w = 640, h = 360;
+    if (ns_frame_open(&f, w, h, err, sizeof err)) {
+        fprintf(stderr, "%s\n", err);
+        return 1;
+    }
+    printf("  %s\n", ns_renderer_info(f.gl));
+    NsImage im = {0}, again = {0};
+    ENSURE(render_block(&b, &f, &im, false) == 0);
+    if (getenv("NS_TEST_PNG")) /* a look at the frame */
+        ns_image_write_png(&im, getenv("NS_TEST_PNG"), err, sizeof err);
+    NsCamera cam;
+    ns_scene_camera(&b.in, NS_VIEW_SIDE, (double)w / h, &cam);
+    /* the needle: its sticking colour (blue) along its line, in and out of the tissue */
+    for (int k = 0; k < 7; k++) {
+        double p[3] = {-0.002 + 0.0035 * k, 0.0, 0.0};
+        const uint8_t *c = pixel(&im, &cam, w, h, 0, p);
+        ENSURE(c != NULL);
+        if (!(c[2] > c[0] + 60 && c[2] > c[1] + 20)) {
+            fprintf(stderr, "needle at x = %.3f: pixel (%d, %d, %d)\n", p[0], c[0], c[1], c[2]);
+            return 1;
+        }
+    }
+    /* the cut face: each region's colour inside its part (away from the needle and targets) */
+    uint8_t r0[3], r1[3];
+    ns_scene_region_rgb(0, false, r0);
+    ns_scene_region_rgb(1, false, r1);
+    const double in0[4][3] = {
+        {0.004, 0.0, 0.006}, {0.016, 0.0, 0.007}, {0.006, 0.0, -0.003}, {0.018, 0.0, 0.004}};
+    const double in1[4][3] = {
+        {0.024, 0.0, 0.006}, {0.036, 0.0, 0.007}, {0.026, 0.0, -0.007}, {0.037, 0.0, -0.002}};
+    for (int k = 0; k < 4; k++) {
+        const uint8_t *c0 = pixel(&im, &cam, w, h, 0, in0[k]);
+        const uint8_t *c1 = pixel(&im, &cam, w, h, 0, in1[k]);
+        if (!near_rgb(c0, r0, 3) || !near_rgb(c1, r1, 3)) {
+            fprintf(stderr,
+                    "region colours: (%d %d %d) want (%d %d %d); (%d %d %d) want (%d %d %d)\n",
+                    c0 ? c0[0] : -1, c0 ? c0[1] : -1, c0 ? c0[2] : -1, r0[0], r0[1], r0[2],
+                    c1 ? c1[0] : -1, c1 ? c1[1] : -1, c1 ? c1[2] : -1, r1[0], r1[1], r1[2]);
+            return 1;
+        }
+    }
+    /* outside the block: the background, not a region's colour */
+    double out[3] = {0.02, 0.0, 0.0115};
+    const uint8_t *bg = pixel(&im, &cam, w, h, 0, out);
+    ENSURE(bg && !near_rgb(bg, r0, 30) && !near_rgb(bg, r1, 30));
+    /* targets: the hit one green, the missed one red */
+    const uint8_t *g = pixel(&im, &cam, w, h, 0, b.target_x);
+    const uint8_t *rd = pixel(&im, &cam, w, h, 0, b.target_x + 3);
+    ENSURE(g && g[1] > g[0] + 60 && g[1] > g[2] + 60);
+    ENSURE(rd && rd[0] > rd[1] + 80 && rd[0] > rd[2] + 80);
+    /* deterministic: the same scene twice gives the same bytes */
+    ENSURE(render_block(&b, &f, &again, false) == 0);
+    ENSURE(memcmp(im.rgb, again.rgb, (size_t)w * h * 3) == 0);
+    /* tets the latest remeshing made are highlighted (yellower), the others not */
+    uint8_t *changed = calloc((size_t)b.mesh.tet_slots, 1);
+    ENSURE(changed != NULL);
+    for (int e = 0; e < b.mesh.tet_slots; e++)
+        changed[e] = b.mesh.tet_region[e] == 1;
+    b.in.changed = changed;
+    ENSURE(render_block(&b, &f, &again, false) == 0);
+    const uint8_t *hl = pixel(&again, &cam, w, h, 0, in1[0]);
+    const uint8_t *plain = pixel(&again, &cam, w, h, 0, in0[0]);
+    ENSURE(hl && !near_rgb(hl, r1, 20) && hl[1] > r1[1] + 40);
+    ENSURE(near_rgb(plain, r0, 3));
+    free(changed);
+    b.in.changed = NULL;
+    /* the HUD draws text (light pixels) in the top left corner, over the background */
+    ENSURE(render_block(&b, &f, &again, true) == 0);
+    int light = 0;
+    for (int y = 0; y < h / 8; y++)
+        for (int x = 0; x < w / 4; x++) {
+            const uint8_t *c = again.rgb + 3 * ((size_t)y * w + x);
+            light += c[0] > 200 && c[1] > 200 && c[2] > 200;
+        }
+    ENSURE(light > 50);
+    ns_image_free(&im);
+    ns_image_free(&again);
+    ns_frame_close(&f);
+    ns_mesh_free(&b.mesh);
+    return 0;
+}
+
+NS_TEST_MAIN({"scene_cut_in_plane", scene_cut_in_plane},
+             {"pixels_show_the_scene", pixels_show_the_scene})
