@@ -36,6 +36,7 @@
 #include "quality.h"
 #include "remesh.h"
 #include "rod.h"
+#include "run_render.h"
 #include "run_spec.h"
 #include "scenario.h"
 #include "tissue.h"
@@ -43,7 +44,8 @@
 static const char run_usage[] =
     "usage: needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]\n"
     "                     [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv]\n"
-    "                     [--no-render] [--quiet]\n";
+    "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
+    "                     [--height H] [--frame-every K] [--quiet]\n";
 
 typedef struct RunOpts {
     const char *scenario, *out_dir, *record, *replay;
@@ -53,6 +55,10 @@ typedef struct RunOpts {
     int threads;
     int solver; /* NsCoupledSolverKind */
     bool quiet;
+    /* pictures (docs/rendering.md): summary.png unless --no-render; frames and video on ask */
+    bool no_render, frames;
+    const char *video;
+    int width, height, frame_every; /* frame_every 0: the scenario's camera decides */
 } RunOpts;
 
 static int usage_error(const char *fmt, const char *arg)
@@ -169,6 +175,20 @@ typedef struct Run {
     bool made_dir, progress_shown, script_finished;
     bool stop_when_done; /* bench: the script's end ends the run even before --steps */
     FILE *traj;
+    /* pictures */
+    bool rendering;
+    NsRunRender rr;
+    int every;          /* steps between frames */
+    int *prev_tet_node; /* the tets before the latest step (what remeshing changed) */
+    int prev_slots, prev_cap;
+    uint8_t *changed; /* per tet slot */
+    bool *obstacle_region;
+    double bounds[6];
+    bool entered;      /* the entry moment was taken */
+    bool *reached;     /* per target: the tip-reached moment was taken */
+    double peak_axial; /* the axial force's peak since the last puncture (moments) */
+    int punctures;
+    double end_s; /* the run's end: last frame, contact sheet, video closed [s] */
 } Run;
 
 static double dot3(const double *a, const double *b)
@@ -716,6 +736,8 @@ static int prepare_outputs(Run *r, char *err, int err_sz)
     remove(old_r);
     free(old_t);
     free(old_r);
+    if (ns_run_render_clear_old(r->opt.out_dir, r->opt.frames, err, err_sz))
+        return -1;
     r->traj = fopen(r->traj_tmp, "w");
     if (!r->traj) {
         ns_set_err(err, err_sz, "cannot write to output folder '%s': %s", r->opt.out_dir,
@@ -750,6 +772,10 @@ static void remove_outputs(Run *r)
         remove(r->traj_tmp);
     if (r->report_tmp)
         remove(r->report_tmp);
+    if (r->rendering) { /* also closes ffmpeg */
+        ns_run_render_abort(&r->rr);
+        r->rendering = false;
+    }
     if (r->made_dir)
         rmdir(r->opt.out_dir); /* only if empty: it is ours */
 }
@@ -1079,6 +1105,43 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_end_object(&j);
     char h[32];
     snprintf(h, sizeof h, "%016llx", (unsigned long long)hash);
+    ns_json_key(&j, "render");
+    ns_json_begin_object(&j);
+    ns_json_key(&j, "enabled");
+    ns_json_bool(&j, r->rendering);
+    if (r->rendering) {
+        double rm, em;
+        ns_run_render_medians(&r->rr, &rm, &em);
+        ns_json_key(&j, "info");
+        ns_json_string(&j, ns_renderer_info(r->rr.frame.gl));
+        ns_json_key(&j, "width");
+        ns_json_int(&j, r->rr.o.width);
+        ns_json_key(&j, "height");
+        ns_json_int(&j, r->rr.o.height);
+        ns_json_key(&j, "frames");
+        ns_json_int(&j, r->rr.frame_count);
+        ns_json_key(&j, "frame_every");
+        ns_json_int(&j, r->every);
+        ns_json_key(&j, "fps");
+        ns_json_number(&j, r->rr.o.fps);
+        ns_json_key(&j, "video");
+        ns_json_string(&j, r->opt.video ? r->opt.video : "");
+        ns_json_key(&j, "moments");
+        ns_json_int(&j, r->rr.moment_count);
+        ns_json_key(&j, "render_ms_median");
+        ns_json_number(&j, rm);
+        ns_json_key(&j, "encode_ms_median");
+        ns_json_number(&j, em);
+        ns_json_key(&j, "ffmpeg_cpu_ms_per_frame");
+        ns_json_number(&j, r->opt.video && r->rr.frame_count
+                               ? 1e3 * r->rr.ffmpeg_cpu_s / (double)r->rr.frame_count
+                               : 0.0);
+        ns_json_key(&j, "render_s");
+        ns_json_number(&j, r->rr.render_s);
+        ns_json_key(&j, "share_of_wall");
+        ns_json_number(&j, r->rr.render_s / fmax(r->wall_s + r->end_s, 1e-9));
+    }
+    ns_json_end_object(&j);
     ns_json_key(&j, "state_hash");
     ns_json_string(&j, h);
     ns_json_end_object(&j);
@@ -1175,6 +1238,301 @@ static void check_obstacles(Run *r, double t, int exited)
     }
 }
 
+/* ---- pictures (issue 8, docs/rendering.md) ---- */
+
+/* Opens the renderer once the tissue and the needle are built: the camera frames the tissue
+ * and the needle as they start. */
+static int render_setup(Run *r, char *err, int err_sz)
+{
+    const NsRunCamera *cam = &r->spec.camera;
+    const NsMesh *M = &r->tissue.mesh;
+    r->every = r->opt.frame_every > 0 ? r->opt.frame_every : cam->frame_every;
+    for (int i = 0; i < 3; i++) {
+        r->bounds[i] = INFINITY;
+        r->bounds[3 + i] = -INFINITY;
+    }
+    for (int k = 0; k < M->node_slots + r->rod.nodes; k++) {
+        const double *x = k < M->node_slots ? M->x + 3 * k : r->rod.x + 3 * (k - M->node_slots);
+        if (k < M->node_slots && M->node_tets[k].count == 0)
+            continue; /* a free slot */
+        for (int i = 0; i < 3; i++) {
+            r->bounds[i] = fmin(r->bounds[i], x[i]);
+            r->bounds[3 + i] = fmax(r->bounds[3 + i], x[i]);
+        }
+    }
+    int regions = r->sc.region_count > 0 ? r->sc.region_count : 1;
+    r->obstacle_region = calloc((size_t)regions, sizeof *r->obstacle_region);
+    r->reached = calloc((size_t)r->spec.target_count + 1, sizeof *r->reached);
+    if (!r->obstacle_region || !r->reached) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    for (int k = 0; k < r->spec.obstacle_count; k++)
+        if (r->spec.obstacles[k].region < regions)
+            r->obstacle_region[r->spec.obstacles[k].region] = true;
+    NsRunRenderOpts o = {.out_dir = r->opt.out_dir,
+                         .frames = r->opt.frames,
+                         .video = r->opt.video,
+                         .summary = true,
+                         .width = r->opt.width,
+                         .height = r->opt.height,
+                         .fps = cam->fps,
+                         .nviews = cam->view_count,
+                         .legend = cam->friction_colours};
+    memcpy(o.views, cam->views, sizeof o.views);
+    if (ns_run_render_open(&r->rr, &o, err, err_sz)) {
+        ns_run_render_abort(&r->rr); /* what it made before it failed */
+        return -1;
+    }
+    r->rendering = true;
+    return 0;
+}
+
+/* Keeps the tets as they are before a step: the frame after it highlights what changed. */
+static int render_before_step(Run *r)
+{
+    const NsMesh *M = &r->tissue.mesh;
+    if (M->tet_slots > r->prev_cap) {
+        int cap = M->tet_slots + M->tet_slots / 2;
+        int *p = realloc(r->prev_tet_node, (size_t)cap * 4 * sizeof *p);
+        uint8_t *c = p ? realloc(r->changed, (size_t)cap) : NULL;
+        if (p)
+            r->prev_tet_node = p;
+        if (c)
+            r->changed = c;
+        if (!p || !c)
+            return -1;
+        r->prev_cap = cap;
+    }
+    memcpy(r->prev_tet_node, M->tet_node, (size_t)M->tet_slots * 4 * sizeof(int));
+    r->prev_slots = M->tet_slots;
+    return 0;
+}
+
+/* A frame (caption NULL) or a key moment of the current state. res: the state's results
+ * (score_run), or NULL to have them worked out here. */
+static int render_now(Run *r, const char *caption, bool final, const Results *res_in, char *err,
+                      int err_sz)
+{
+    const NsRunSpec *sp = &r->spec;
+    const NsMesh *M = &r->tissue.mesh;
+    Results own;
+    const Results *res = res_in;
+    if (M->tet_slots > r->prev_cap) { /* the step added tets: room to mark them */
+        uint8_t *c = realloc(r->changed, (size_t)M->tet_slots);
+        if (!c) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        r->changed = c;
+    }
+    if (!res) {
+        /* score_run moves the lookups' starting tets (hints); a target on a face between two
+         * tets may then be found in the other one, and the final score would depend on the
+         * frames drawn. Drawing leaves them as they were. */
+        int nt = sp->target_count,
+            *hints = malloc(((size_t)nt + (size_t)r->seed_n + 1) * sizeof *hints);
+        if (!hints) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        memcpy(hints, r->target_hint, (size_t)nt * sizeof *hints);
+        for (int k = 0; k < r->seed_n; k++)
+            hints[nt + k] = r->seeds[k].hint;
+        int bad = score_run(r, &own);
+        memcpy(r->target_hint, hints, (size_t)nt * sizeof *hints);
+        for (int k = 0; k < r->seed_n; k++)
+            r->seeds[k].hint = hints[nt + k];
+        free(hints);
+        if (bad) {
+            results_free(&own);
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        res = &own;
+    }
+    int nt = sp->target_count, ns = r->seed_n, nm = sp->marker_count;
+    double *buf = malloc((size_t)(4 * nt + 3 * ns + 3 * nm + 1) * sizeof *buf);
+    bool *hit = malloc((size_t)nt + 1);
+    int rc = 0;
+    if (!buf || !hit) {
+        ns_set_err(err, err_sz, "out of memory");
+        rc = -1;
+    }
+    NsSceneInput in;
+    memset(&in, 0, sizeof in);
+    double near = INFINITY;
+    int near_i = -1;
+    if (rc == 0) {
+        double *tx = buf, *tr = buf + 3 * nt, *sx = tr + nt, *mx = sx + 3 * ns;
+        for (int i = 0; i < nt; i++) {
+            memcpy(tx + 3 * i, res->targets[i].x, 3 * sizeof(double));
+            tr[i] = sp->targets[i].tolerance;
+            hit[i] = res->targets[i].hit;
+            double d = dist_mm(tip_of(r), res->targets[i].x);
+            if (d < near) {
+                near = d;
+                near_i = i;
+            }
+        }
+        for (int k = 0; k < ns; k++)
+            memcpy(sx + 3 * k, res->seeds[k].x, 3 * sizeof(double));
+        for (int k = 0; k < nm; k++)
+            memcpy(mx + 3 * k, res->markers[k], 3 * sizeof(double));
+        for (int e = 0; r->changed && e < M->tet_slots; e++)
+            r->changed[e] =
+                M->tet_node[4 * e] >= 0 &&
+                (e >= r->prev_slots ||
+                 memcmp(M->tet_node + 4 * e, r->prev_tet_node + 4 * e, 4 * sizeof(int)) != 0);
+        in.mesh = M;
+        in.changed = r->changed && r->prev_slots > 0 ? r->changed : NULL;
+        in.obstacle_region = r->obstacle_region;
+        in.regions = r->sc.region_count;
+        in.rod_x = r->rod.x;
+        in.rod_nodes = r->rod.nodes;
+        in.rod_radius = 0.5 * sp->diameter;
+        in.state = sp->camera.friction_colours ? r->c.state : NULL;
+        in.cutting = r->last_cutting != 0;
+        in.bevel = sp->bevel;
+        if (sp->bevel) {
+            double t[3], m1[3];
+            ns_rod_tip_frame(&r->rod, t, m1, in.m2);
+        }
+        in.held = r->rod.held;
+        in.target_x = tx;
+        in.target_r = tr;
+        in.target_hit = hit;
+        in.targets = nt;
+        in.seed_x = sx;
+        in.seeds = ns;
+        in.marker_x = mx;
+        in.markers = nm;
+        memcpy(in.axis, sp->entry_dir, sizeof in.axis);
+        memcpy(in.entry, sp->entry_point, sizeof in.entry);
+        memcpy(in.bounds, r->bounds, sizeof in.bounds);
+        in.has_cut_normal = sp->camera.has_cut_normal;
+        memcpy(in.cut_normal, sp->camera.cut_normal, sizeof in.cut_normal);
+        in.tet_edges = sp->camera.tet_edges;
+    }
+    char l0[160], l1[160], l2[160], l3[160];
+    snprintf(l0, sizeof l0, "%s%s", r->sc.name, r->opt.replay ? " (replay)" : "");
+    snprintf(l1, sizeof l1, "t %.2f s   depth %.1f mm   axial force %.2f N",
+             (double)r->steps * sp->dt, 1e3 * depth_of(r), r->last_axial);
+    if (near_i >= 0)
+        snprintf(l2, sizeof l2, "nearest target %s: %.1f mm", sp->targets[near_i].name, near);
+    else
+        snprintf(l2, sizeof l2, "no targets");
+    snprintf(l3, sizeof l3, "score so far %.1f / 100   seeds %d of %d", res->total, r->seed_n,
+             sp->seed_count);
+    const char *hud[4] = {l0, l1, l2, l3};
+    if (rc == 0)
+        rc = caption ? ns_run_render_moment(&r->rr, &in, hud, 4, caption, final, err, err_sz)
+                     : ns_run_render_frame(&r->rr, &in, hud, 4, err, err_sz);
+    free(buf);
+    free(hit);
+    if (!res_in)
+        results_free(&own);
+    return rc;
+}
+
+/* After a step: the key moments (entry, a seed released, the tip reaching a target, a
+ * puncture: the axial force falling by 40 % from its peak while the tip cuts on) and the
+ * frame. */
+static int render_after_step(Run *r, const NsCouplingStats *st, bool dropped, char *err, int err_sz)
+{
+    const NsRunSpec *sp = &r->spec;
+    double t = (double)r->steps * sp->dt;
+    char cap[96];
+    if (st->cutting && !r->entered) {
+        r->entered = true;
+        snprintf(cap, sizeof cap, "entry, t = %.2f s", t);
+        if (render_now(r, cap, false, NULL, err, err_sz))
+            return -1;
+    }
+    if (dropped) {
+        snprintf(cap, sizeof cap, "seed %d released, t = %.2f s", r->seed_n, t);
+        if (render_now(r, cap, false, NULL, err, err_sz))
+            return -1;
+    }
+    for (int i = 0; i < sp->target_count; i++) {
+        if (r->reached[i])
+            continue;
+        double x[3];
+        int h = r->target_hint[i];
+        if (world_of(&r->tissue.mesh, sp->targets[i].at, &h, x) == 0 &&
+            dist_mm(tip_of(r), x) <= 1e3 * sp->targets[i].tolerance) {
+            r->reached[i] = true;
+            snprintf(cap, sizeof cap, "tip reaches %s, t = %.2f s", sp->targets[i].name, t);
+            if (render_now(r, cap, false, NULL, err, err_sz))
+                return -1;
+        }
+    }
+    /* a puncture: the tip cut on, through the membrane, with much less force */
+    double f = fabs(st->axial_force);
+    if (r->punctures < 3 && st->cutting && r->peak_axial > 0.05 && f < 0.6 * r->peak_axial) {
+        snprintf(cap, sizeof cap, "puncture: axial force %.2f -> %.2f N, t = %.2f s", r->peak_axial,
+                 f, t);
+        r->punctures++;
+        r->peak_axial = f;
+        if (render_now(r, cap, false, NULL, err, err_sz))
+            return -1;
+    }
+    r->peak_axial = st->cutting ? fmax(r->peak_axial, f) : 0.0;
+    bool frames = r->opt.frames || r->opt.video;
+    if (frames && r->steps % r->every == 0 && render_now(r, NULL, false, NULL, err, err_sz))
+        return -1;
+    return 0;
+}
+
+/* The run's end: its last frame, the end moment and the contact sheet with the score table. */
+static int render_end(Run *r, const Results *res, char *err, int err_sz)
+{
+    const NsRunSpec *sp = &r->spec;
+    bool frames = r->opt.frames || r->opt.video;
+    if (frames && r->steps % r->every != 0 && render_now(r, NULL, false, res, err, err_sz))
+        return -1;
+    char cap[96], missed[64] = "";
+    for (int i = 0; i < sp->target_count; i++)
+        if (!res->targets[i].hit)
+            snprintf(missed + strlen(missed), sizeof missed - strlen(missed), "%s%s",
+                     missed[0] ? ", " : " (missed: ", sp->targets[i].name);
+    if (missed[0])
+        snprintf(missed + strlen(missed), sizeof missed - strlen(missed), ")");
+    snprintf(cap, sizeof cap, "end, t = %.2f s%s", (double)r->steps * sp->dt, missed);
+    if (render_now(r, cap, true, res, err, err_sz))
+        return -1;
+    enum { ROWS = 32 };
+    char rows[ROWS][128];
+    int n = 0;
+    if (sp->target_count)
+        snprintf(rows[n++], sizeof rows[0], "%-22s %9s %8s %5s %4s", "target", "error mm", "tol mm",
+                 "by", "hit");
+    for (int i = 0; i < sp->target_count && n < ROWS - 4; i++)
+        snprintf(rows[n++], sizeof rows[0], "%-22.22s %9.2f %8.2f %5s %4s", sp->targets[i].name,
+                 res->targets[i].error_mm, 1e3 * sp->targets[i].tolerance,
+                 res->targets[i].by_seed ? "seed" : "tip", res->targets[i].hit ? "yes" : "no");
+    if (sp->seed_count || r->seed_n)
+        snprintf(rows[n++], sizeof rows[0], "seeds released %d of %d planned", r->seed_n,
+                 sp->seed_count);
+    for (int k = 0; k < sp->obstacle_count && n < ROWS - 2; k++)
+        if (r->obst[k].violated)
+            snprintf(rows[n++], sizeof rows[0], "obstacle %s entered at t = %.2f s, %.1f mm deep",
+                     sp->obstacles[k].name, r->obst[k].first_t, 1e3 * r->obst[k].max_depth);
+    snprintf(rows[n++], sizeof rows[0],
+             "score %.1f / 100 (targets %.1f, obstacles -%.0f); insertions %d", res->total,
+             res->target_part, res->obstacle_penalty, r->insertions);
+    snprintf(rows[n++], sizeof rows[0],
+             "warnings: NaN %d, inverted %d, unconverged %d, friction unresolved %d", r->nan,
+             r->inverted, r->unconverged, r->lcp_unresolved);
+    const char *table[ROWS];
+    for (int i = 0; i < n; i++)
+        table[i] = rows[i];
+    char title[160];
+    snprintf(title, sizeof title, "%s: score %.1f / 100, %ld steps, %.2f s", r->sc.name, res->total,
+             r->steps, (double)r->steps * sp->dt);
+    return ns_run_render_finish(&r->rr, title, table, n, err, err_sz);
+}
+
 /* ---- the loop ---- */
 
 static void progress(const Run *r, long total, double t)
@@ -1210,6 +1568,9 @@ static int run_loop(Run *r, char *err, int err_sz)
     int more = 1;
     r->needles = 1;
     double t0 = now_s();
+    if (r->rendering && (r->opt.frames || r->opt.video) &&
+        render_now(r, NULL, false, NULL, err, err_sz))
+        return -1;
     while (max_steps > 0 ? r->steps < max_steps : more) {
         if (max_steps == 0 && r->steps >= hard_cap) {
             ns_set_err(err, err_sz,
@@ -1248,6 +1609,10 @@ static int run_loop(Run *r, char *err, int err_sz)
         if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
             r->insertions++;
         r->prev_v = r->rod.v_insert;
+        if (r->rendering && render_before_step(r)) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
         NsCouplingStats st;
         double w0 = now_s();
         int rc = ns_coupled_step(&r->c, sp->dt, NULL, NULL, &st);
@@ -1308,6 +1673,8 @@ static int run_loop(Run *r, char *err, int err_sz)
         if (r->traj)
             fputc('\n', r->traj);
         check_obstacles(r, (double)r->steps * sp->dt, r->exited);
+        if (r->rendering && render_after_step(r, &st, ctl.drop_seed, err, err_sz))
+            return -1;
         if (tty && (r->steps % 10 == 0)) {
             progress(r, max_steps, (double)r->steps * sp->dt);
             r->progress_shown = true;
@@ -1323,6 +1690,12 @@ static int run_loop(Run *r, char *err, int err_sz)
 
 static void run_free(Run *r)
 {
+    if (r->rendering)
+        ns_run_render_free(&r->rr);
+    free(r->prev_tet_node);
+    free(r->changed);
+    free(r->obstacle_region);
+    free(r->reached);
     lua_State *L = r->have_sc ? ns_lua_state(r->sc.lua) : NULL;
     if (L && r->sim_ref != LUA_NOREF)
         luaL_unref(L, LUA_REGISTRYINDEX, r->sim_ref);
@@ -1404,14 +1777,38 @@ static int parse_args(int argc, char **argv, RunOpts *o)
                 else
                     o->threads = (int)n;
             }
+        } else if (strcmp(a, "--video") == 0) {
+            if (!v)
+                return usage_error("%s needs a value", a);
+            size_t n = strlen(v);
+            if (n < 5 || strcasecmp(v + n - 4, ".mp4") != 0)
+                return usage_error("--video '%s': expected a FILE.mp4 path", v);
+            o->video = v;
+            i++;
+        } else if (strcmp(a, "--width") == 0 || strcmp(a, "--height") == 0 ||
+                   strcmp(a, "--frame-every") == 0) {
+            if (!v)
+                return usage_error("%s needs a value", a);
+            char *end;
+            long n = strtol(v, &end, 10);
+            bool every = strcmp(a, "--frame-every") == 0;
+            if (*end || (every ? (n < 1 || n > 1000000) : (n < 16 || n > 8192 || n % 2)))
+                return usage_error(every ? "%s: expected a positive integer"
+                                         : "%s: expected an even number of pixels in 16..8192",
+                                   a);
+            if (every)
+                o->frame_every = (int)n;
+            else if (a[2] == 'w')
+                o->width = (int)n;
+            else
+                o->height = (int)n;
+            i++;
+        } else if (strcmp(a, "--frames") == 0) {
+            o->frames = true;
         } else if (strcmp(a, "--no-render") == 0) {
-            /* rendering is not built yet: nothing to turn off */
+            o->no_render = true;
         } else if (strcmp(a, "--quiet") == 0) {
             o->quiet = true;
-        } else if (strcmp(a, "--frames") == 0 || strcmp(a, "--video") == 0 ||
-                   strcmp(a, "--width") == 0 || strcmp(a, "--height") == 0) {
-            fprintf(stderr, "needlesim run: %s is not available in this version yet\n", a);
-            return 2;
         } else if (a[0] == '-' && a[1] != '\0') {
             return usage_error("unknown option '%s'", a);
         } else if (!o->scenario) {
@@ -1424,6 +1821,12 @@ static int parse_args(int argc, char **argv, RunOpts *o)
         return usage_error("%s", "missing SCENARIO.lua");
     if (o->record && o->replay && strcmp(o->record, o->replay) == 0)
         return usage_error("--record and --replay name the same file '%s'", o->record);
+    if (o->no_render && (o->frames || o->video))
+        return usage_error("%s", "--no-render with --frames or --video: which is it?");
+    if (o->no_render && (o->width || o->height || o->frame_every))
+        return usage_error("%s", "--no-render with --width, --height or --frame-every");
+    o->width = o->width ? o->width : 1280;
+    o->height = o->height ? o->height : 720;
     return 0;
 }
 
@@ -1496,12 +1899,19 @@ int ns_cmd_run(int argc, char **argv)
     if (rc == 0)
         write_traj_header(&r);
     rc = rc ? rc : build(&r, err, sizeof err);
+    if (rc == 0 && !r.opt.no_render)
+        rc = render_setup(&r, err, sizeof err);
     rc = rc ? rc : run_loop(&r, err, sizeof err);
     Results res;
     memset(&res, 0, sizeof res);
     if (rc == 0 && score_run(&r, &res)) {
         ns_set_err(err, sizeof err, "out of memory");
         rc = -1;
+    }
+    if (rc == 0 && r.rendering) {
+        double t0 = now_s();
+        rc = render_end(&r, &res, err, sizeof err);
+        r.end_s = now_s() - t0;
     }
     uint64_t hash = rc == 0 ? ns_coupled_state_hash(&r.c) : 0;
     if (rc == 0) {
@@ -1522,6 +1932,12 @@ int ns_cmd_run(int argc, char **argv)
                        strerror(errno));
             if (traj)
                 remove(traj);
+            rc = -1;
+        }
+        /* The pictures before the log: they are part of the run's outputs. */
+        if (rc == 0 && r.rendering && ns_run_render_commit(&r.rr, err, sizeof err)) {
+            remove(traj);
+            remove(rep);
             rc = -1;
         }
         /* The control log last: a log on disk means the run and its report are there. */
@@ -1574,6 +1990,25 @@ int ns_cmd_run(int argc, char **argv)
                r.unconverged, r.lcp_unresolved);
         printf("wrote %s/report.json and %s/trajectory.csv (state hash %016llx)\n", r.opt.out_dir,
                r.opt.out_dir, (unsigned long long)hash);
+        if (r.rendering) {
+            double rm, em;
+            ns_run_render_medians(&r.rr, &rm, &em);
+            printf("wrote %s/summary.png (%d moments)", r.opt.out_dir, r.rr.moment_count);
+            if (r.opt.frames)
+                printf(", %s/frames/ (%ld frames)", r.opt.out_dir, r.rr.frame_count);
+            if (r.opt.video)
+                printf(", %s (%ld frames at %g fps)", r.opt.video, r.rr.frame_count, r.rr.o.fps);
+            printf("\n");
+            if (r.rr.frame_count)
+                printf("rendering: %.1f ms a frame, writing %.1f ms (medians); %.0f %% of the "
+                       "run's wall time",
+                       rm, em, 100.0 * r.rr.render_s / fmax(r.wall_s + r.end_s, 1e-9));
+            if (r.rr.frame_count && r.opt.video)
+                printf("; ffmpeg's encoding %.1f ms of CPU a frame (beside the run)",
+                       1e3 * r.rr.ffmpeg_cpu_s / (double)r.rr.frame_count);
+            if (r.rr.frame_count)
+                printf("\n");
+        }
     }
     results_free(&res);
     run_free(&r);

@@ -59,6 +59,53 @@ static char *str_field(lua_State *L, int idx, const char *key, const char *dflt)
     return out;
 }
 
+static bool bool_field(lua_State *L, int idx, const char *key, bool dflt)
+{
+    bool v = dflt;
+    if (raw_field(L, idx, key) == LUA_TBOOLEAN)
+        v = lua_toboolean(L, -1);
+    lua_pop(L, 1);
+    return v;
+}
+
+/* camera = {...} (the Lua side checked it and filled in its defaults). */
+static void read_camera(lua_State *L, int si, NsRunCamera *cam)
+{
+    cam->views[0] = 0;
+    cam->view_count = 1;
+    cam->fps = 25.0;
+    cam->frame_every = 1;
+    cam->tet_edges = cam->friction_colours = true;
+    if (raw_field(L, si, "camera") == LUA_TTABLE) {
+        int ci = lua_gettop(L);
+        if (raw_field(L, ci, "views") == LUA_TTABLE) {
+            int n = (int)lua_rawlen(L, -1);
+            cam->view_count = 0;
+            for (int i = 0; i < n && i < 3; i++) {
+                lua_rawgeti(L, -1, i + 1);
+                const char *v = lua_tostring(L, -1);
+                cam->views[cam->view_count++] = v && strcmp(v, "top") == 0    ? 1
+                                                : v && strcmp(v, "axis") == 0 ? 2
+                                                                              : 0;
+                lua_pop(L, 1);
+            }
+            if (cam->view_count == 0)
+                cam->view_count = 1;
+        }
+        lua_pop(L, 1);
+        cam->fps = num_field(L, ci, "fps", 25.0);
+        cam->frame_every = (int)num_field(L, ci, "frame_every", 1.0);
+        raw_field(L, ci, "cut_normal");
+        cam->has_cut_normal = lua_istable(L, -1);
+        lua_pop(L, 1);
+        if (cam->has_cut_normal)
+            vec_field(L, ci, "cut_normal", cam->cut_normal);
+        cam->tet_edges = bool_field(L, ci, "tet_edges", true);
+        cam->friction_colours = bool_field(L, ci, "friction_colours", true);
+    }
+    lua_pop(L, 1);
+}
+
 /* Markers, obstacles (their region names resolved) and the seed plan (target names resolved;
  * the Lua side checked that they name targets). */
 static int read_lists(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int si, char *err,
@@ -249,6 +296,8 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         }
     }
     lua_settop(L, si);
+    if (rc == 0)
+        read_camera(L, si, &spec->camera);
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
     lua_settop(L, top);

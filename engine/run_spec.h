@@ -27,6 +27,17 @@ typedef struct NsRunObstacle {
     int region; /* index into the scenario's regions */
 } NsRunObstacle;
 
+/* camera = {...}: what frames and videos show (docs/rendering.md). */
+typedef struct NsRunCamera {
+    int views[3]; /* NsView (render/scene.h): 0 side, 1 top, 2 axis */
+    int view_count;
+    double fps;
+    int frame_every; /* steps between frames */
+    bool has_cut_normal;
+    double cut_normal[3];
+    bool tet_edges, friction_colours;
+} NsRunCamera;
+
 typedef struct NsRunSpec {
     /* ns.needle{} (the stiff default when the scenario has none) */
     char *needle_kind;
@@ -48,6 +59,7 @@ typedef struct NsRunSpec {
     double dt;       /* [s]: the scenario's, else 0.01 */
     double duration; /* [s]: the scenario's, else 0 (until the script ends) */
     bool has_script, has_on_tick;
+    NsRunCamera camera;
 } NsRunSpec;
 
 /* Reads sc's run fields. Returns 0, or -1 with one line naming the scenario's file and line

@@ -361,15 +361,21 @@ int ns_renderer_draw(NsRenderer *r, const NsScene *s, int x, int y, int w, int h
     glDisable(GL_POLYGON_OFFSET_FILL);
     glDepthFunc(GL_LEQUAL);
     draw_buf(r, &s->edges, GL_LINES);
-    /* 2. the solids, then again faded where the tissue hides them */
+    /* 2. the solids: first faded where the cut face hides them (the depth buffer holds only
+     * the cap), then solid over it where they show (their own back faces stay hidden) */
     glUniform1i(r->u_lit, 1);
-    glDepthFunc(GL_LESS);
-    draw_buf(r, &s->solid, GL_TRIANGLES);
     glEnable(GL_BLEND);
     glDepthMask(GL_FALSE);
     glDepthFunc(GL_GREATER);
     glUniform1f(r->u_alpha, 0.3f);
     draw_buf(r, &s->solid, GL_TRIANGLES);
+    glDisable(GL_BLEND);
+    glDepthMask(GL_TRUE);
+    glDepthFunc(GL_LESS);
+    glUniform1f(r->u_alpha, 1.0f);
+    draw_buf(r, &s->solid, GL_TRIANGLES);
+    glEnable(GL_BLEND);
+    glDepthMask(GL_FALSE);
     /* 3. the outer surface, translucent, the removed half clipped */
     glDepthFunc(GL_LESS);
     glUniform1f(r->u_alpha, 1.0f);

@@ -152,7 +152,7 @@ void ns_scene_camera(const NsSceneInput *in, NsView v, double aspect, NsCamera *
         normalize(u);
     }
     cross(f, u, r);
-    double c[3], half_w = 0.0, half_h = 0.0;
+    double c[3], half_w = 0.0, half_h = 0.0, half_d = 0.0;
     for (int i = 0; i < 3; i++)
         c[i] = 0.5 * (in->bounds[i] + in->bounds[3 + i]);
     for (int k = 0; k < 8; k++) { /* the box's corners on the view's right and up axes */
@@ -161,10 +161,12 @@ void ns_scene_camera(const NsSceneInput *in, NsView v, double aspect, NsCamera *
             p[i] = ((k >> i) & 1 ? in->bounds[3 + i] : in->bounds[i]) - c[i];
         half_w = fmax(half_w, fabs(dot(p, r)));
         half_h = fmax(half_h, fabs(dot(p, u)));
+        half_d = fmax(half_d, fabs(dot(p, f)));
     }
     cam->fov_deg = 30.0;
     double t = tan(0.5 * cam->fov_deg * M_PI / 180.0);
-    double dist = 1.12 * fmax(half_h / t, half_w / (t * aspect));
+    /* the box fills the view at its centre's depth (the cut); the eye stays outside it */
+    double dist = fmax(1.12 * fmax(half_h / t, half_w / (t * aspect)), 1.2 * half_d);
     if (!(dist > 0.0))
         dist = 0.1;
     for (int i = 0; i < 3; i++) {

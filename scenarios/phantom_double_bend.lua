@@ -17,6 +17,7 @@ return ns.scenario {
     needle = single.needle,
     entry = single.entry,
     markers = single.markers,
+    camera = single.camera,
     script = function()
         act.insert { speed = 0.01, depth = 0.05 }
         act.twist { angle = math.pi, rate = math.pi / 0.2 } -- half a turn in 0.2 s, paused

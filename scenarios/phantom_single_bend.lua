@@ -47,6 +47,8 @@ return ns.scenario {
     -- The bevel faces sideways (+y): the needle bends in the horizontal plane, as in the paper.
     entry = { point = { 0, 0, 2 * h }, direction = { 1, 0, 0 }, bevel_toward = { 0, 1, 0 } },
     markers = markers,
+    -- The bend is horizontal: seen from above, cut level with the needle.
+    camera = { views = { "top" } },
     script = function()
         act.insert { speed = 0.01, depth = 0.10 } -- 10 cm at 10 mm/s, no twist
         act.wait { time = 0.5 }

@@ -47,6 +47,9 @@ return ns.scenario {
         },
     },
     dt = 0.01,
+    -- The needle steers in the x-y plane: seen from above, cut level with it, the rods show as
+    -- discs beside its path; the side view beside it.
+    camera = { views = { "top", "side" } },
     needle = ns.needle { kind = "flexible", bevel_deg = 30 },
     -- On the lattice line y = 4 cm, z = 2 cm, the bevel steering towards +y at first.
     entry = { point = { 0, 0.04, 0.02 }, direction = { 1, 0, 0 }, bevel_toward = { 0, 1, 0 } },

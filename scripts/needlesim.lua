@@ -874,13 +874,57 @@ local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "durati
     "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
     "accuracy", "solver" }
 -- Accepted now and checked by the stages that use them (later versions).
-local RESERVED = { "camera", "accuracy", "solver" }
+local RESERVED = { "accuracy", "solver" }
 
 local ENTRY_FIELDS = { "point", "direction", "bevel_toward" }
 local TARGET_FIELDS = { "name", "at", "tolerance" }
 local MARKER_FIELDS = { "name", "at" }
 local OBSTACLE_FIELDS = { "name", "region" }
 local SEED_FIELDS = { "target" }
+local CAMERA_FIELDS = { "views", "fps", "frame_every", "cut_normal", "tet_edges",
+    "friction_colours" }
+local VIEWS = { side = true, top = true, axis = true }
+
+-- camera = {views, fps, frame_every, cut_normal, tet_edges, friction_colours}: what the frames
+-- and the video show (docs/rendering.md). Defaults: the side view, 25 frames a second, a frame
+-- every 1/(fps dt) steps (real time), the cut through the insertion axis facing the camera.
+local function camera_of(v, where, dt)
+    local a = args(v or {}, "ns.scenario: camera", where, CAMERA_FIELDS)
+    local c = { views = {} }
+    local views = a:get("views")
+    if views == nil then
+        c.views = { "side" }
+    else
+        if type(views) ~= "table" or kind_of(views) or #views < 1 or #views > 3 then
+            a:fail("views must be a list of 1 to 3 of 'side', 'top', 'axis' (got %s)",
+                describe(views))
+        end
+        local seen = {}
+        for i, name in ipairs(views) do
+            if not VIEWS[name] then
+                a:fail("views[%d] must be 'side', 'top' or 'axis' (got %s)", i, describe(name))
+            end
+            if seen[name] then
+                a:fail("views[%d]: '%s' is listed twice", i, name)
+            end
+            seen[name] = true
+            c.views[i] = name
+        end
+    end
+    c.fps = a:number("fps", function(x) return x > 0 and x <= 120 end, "in (0, 120]", 25)
+    c.frame_every = a:number("frame_every",
+        function(x) return x >= 1 and x <= 1e6 and x % 1 == 0 end, "(an integer in [1, 1e6] [steps])", math.max(1, math.floor(1 / (c.fps * dt) + 0.5)))
+    c.cut_normal = a:vec3("cut_normal", ANY, "", OPTIONAL)
+    if c.cut_normal then
+        local n = c.cut_normal
+        if n[1] == 0 and n[2] == 0 and n[3] == 0 then
+            a:fail("cut_normal must not be zero")
+        end
+    end
+    c.tet_edges = a:boolean("tet_edges", true)
+    c.friction_colours = a:boolean("friction_colours", true)
+    return c
+end
 
 -- A list field of tables, each checked by `one(args, i)`; names unique when `named`.
 local function list_of(v, where, field, fields, one, named)
@@ -1006,6 +1050,7 @@ function ns.scenario(t)
                 i, sd.target))
         end
     end
+    sc.camera = camera_of(t.camera, where, sc.dt or 0.01)
     for _, k in ipairs(RESERVED) do
         sc[k] = t[k]
     end

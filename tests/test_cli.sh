@@ -360,6 +360,12 @@ expect_error "Lua syntax error" 1 "tests/data/bad_syntax.lua:4:" "expected" -- \
 expect_error "misspelt field in ns.scenario" 1 \
     "tests/data/bad_scenario_field.lua:2: ns.scenario: unknown field 'tisue'" -- \
     check tests/data/bad_scenario_field.lua
+expect_error "camera: unknown view" 1 \
+    "tests/data/bad_camera.lua:2: ns.scenario: camera: views[2] must be 'side', 'top' or 'axis'" -- \
+    check tests/data/bad_camera.lua
+expect_error "camera: misspelt field" 1 \
+    "tests/data/bad_camera_field.lua:2: ns.scenario: camera: unknown field 'tet_edge'" \
+    "did you mean 'tet_edges'" -- check tests/data/bad_camera_field.lua
 expect_error "misspelt field in ns.tissue.box" 1 \
     "tests/data/bad_box_field.lua:4: ns.tissue.box: unknown field 'resolutoin'" \
     "did you mean 'resolution'" -- check tests/data/bad_box_field.lua

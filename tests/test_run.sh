@@ -39,8 +39,8 @@ pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
 fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
 
 if [ "$PART" = brachytherapy ]; then
-"$BIN" run "$SRC/scenarios/brachytherapy.lua" --no-render -o "$TMP/b" --record "$TMP/b.csv" \
-    >"$TMP/out" 2>"$TMP/err"
+"$BIN" run "$SRC/scenarios/brachytherapy.lua" --video "$TMP/b/brachy.mp4" -o "$TMP/b" \
+    --record "$TMP/b.csv" >"$TMP/out" 2>"$TMP/err"
 rc=$?
 cat "$TMP/out"
 if [ $rc = 0 ]; then pass "brachytherapy runs"; else fail "brachytherapy runs" "exit $rc: $(tail -2 "$TMP/err")"; fi
@@ -58,6 +58,22 @@ assert r["script_finished"] and r["needle"]["depth_m"] < 0.002
 print("hit: " + ", ".join(hits) + "; errors " + ", ".join("%.2f mm" % t["error_mm"] for t in r["targets"]))
 PY
 if [ $? = 0 ]; then pass "report finite, seeds released, a target hit, no obstacle entered ($(cat "$TMP/py"))"; else fail "report" "$(tail -1 "$TMP/py")"; fi
+# The issue's video: H.264, 1280x720, yuv420p, one frame per frame rendered; the contact sheet.
+python3 - "$TMP/b" <<'PY' >"$TMP/py_v" 2>&1
+import json, os, subprocess, sys
+d = sys.argv[1]
+r = json.load(open(d + "/report.json"))
+want = 1 + -(-r["steps"] // r["render"]["frame_every"])
+out = subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-count_frames",
+                      "-show_entries", "stream=codec_name,width,height,pix_fmt,nb_read_frames",
+                      "-of", "csv=p=0", d + "/brachy.mp4"], capture_output=True, text=True).stdout
+assert out.strip() == "h264,1280,720,yuv420p,%d" % want, (out, want)
+assert os.path.getsize(d + "/summary.png") > 10000
+print("ffprobe: %s; %.1f ms a frame to render, %.1f to encode, %.0f %% of the wall time" % (
+    out.strip(), r["render"]["render_ms_median"], r["render"]["encode_ms_median"],
+    100 * r["render"]["share_of_wall"]))
+PY
+if [ $? = 0 ]; then pass "brachytherapy video and summary.png ($(cat "$TMP/py_v"))"; else fail "video" "$(tail -1 "$TMP/py_v")"; fi
 # The log replayed (seed events included): the same state and score.
 "$BIN" run "$SRC/scenarios/brachytherapy.lua" --no-render -o "$TMP/b2" --replay "$TMP/b.csv" \
     --quiet >/dev/null 2>"$TMP/err2"
@@ -211,12 +227,14 @@ bad no_entry 's/^    entry = .*$//' "no_entry.lua:[0-9]+: ns.scenario: missing f
 bad bad_tolerance 's/tolerance = 2e-3/tolerance = -1/' \
     "bad_tolerance.lua:[0-9]+: ns.scenario: targets\[1\]: tolerance must be a number > 0"
 # Errors that only show while running: the output folder is then created, so the check that no
-# report.json is left (and that an earlier run's is gone) can fail.
+# report.json is left (and that an earlier run's is gone) can fail. The runs draw frames and a
+# video too: none of them (nor their temporary names) may be left either.
 bad_running() { # name, sed expression, expected message (grep -E)
     sed "$2" "$TUT" >"$TMP/$1.lua"
     mkdir -p "$TMP/o_$1"
     echo '{"stale": true}' >"$TMP/o_$1/report.json"
-    "$BIN" run "$TMP/$1.lua" -o "$TMP/o_$1" --quiet >"$TMP/out_$1" 2>"$TMP/err_$1"
+    "$BIN" run "$TMP/$1.lua" -o "$TMP/o_$1" --quiet --frames --video "$TMP/o_$1/v.mp4" \
+        --width 160 --height 96 --frame-every 4 >"$TMP/out_$1" 2>"$TMP/err_$1"
     local rc=$?
     if [ $rc = 1 ] && grep -Eq "$3" "$TMP/err_$1" && [ ! -e "$TMP/o_$1/report.json" ] &&
         [ ! -e "$TMP/o_$1/trajectory.csv" ] && [ -z "$(ls -A "$TMP/o_$1")" ]; then
@@ -358,6 +376,110 @@ if [ $rc = 2 ] && grep -q "unknown option '--bogus'" "$TMP/err_u"; then pass "un
 "$BIN" run "$TUT" --steps 0 >/dev/null 2>"$TMP/err_s"
 rc=$?
 if [ $rc = 2 ]; then pass "--steps 0: exit 2"; else fail "--steps 0" "exit $rc"; fi
+
+# Pictures (docs/rendering.md): the frames, a video ffprobe reads as H.264 with one frame per
+# frame written, the contact sheet; the same frames from a second run; and their errors.
+PIC="--width 320 --height 180 --frame-every 8"
+"$BIN" run "$TUT" -o "$TMP/r1" --frames --video "$TMP/r1/tut.mp4" $PIC --quiet >/dev/null 2>"$TMP/err_r1"
+rc=$?
+if [ $rc = 0 ] && python3 - "$TMP/r1" <<'PY' >"$TMP/py_r1" 2>&1; then
+import json, os, subprocess, sys
+d = sys.argv[1]
+r = json.load(open(d + "/report.json"))
+want = 1 + -(-r["steps"] // 8)  # the first state, then every 8th step and the last
+frames = sorted(os.listdir(d + "/frames"))
+assert frames == ["%06d.png" % i for i in range(want)], (len(frames), want)
+assert r["render"]["frames"] == want, r["render"]
+out = subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-count_frames",
+                      "-show_entries", "stream=codec_name,width,height,pix_fmt,nb_read_frames",
+                      "-of", "csv=p=0", d + "/tut.mp4"], capture_output=True, text=True).stdout
+assert out.strip() == "h264,320,180,yuv420p,%d" % want, out
+png = open(d + "/summary.png", "rb").read(24)
+assert png[:8] == b"\x89PNG\r\n\x1a\n", "summary.png is not a PNG"
+assert not [f for f in os.listdir(d) if f.endswith(".part")], os.listdir(d)
+print("%d frames, ffprobe: %s" % (want, out.strip()))
+PY
+    pass "--frames --video: frames, H.264 video and summary.png ($(cat "$TMP/py_r1"))"
+else
+    fail "--frames --video" "exit $rc: $(head -1 "$TMP/err_r1") $(tail -1 "$TMP/py_r1" 2>/dev/null)"
+fi
+"$BIN" run "$TUT" -o "$TMP/r2" --frames $PIC --quiet >/dev/null 2>&1
+if [ -d "$TMP/r2/frames" ] && diff -r -q "$TMP/r1/frames" "$TMP/r2/frames" >/dev/null; then
+    pass "two runs give byte-identical frames"
+else
+    fail "deterministic frames" "$(diff -r -q "$TMP/r1/frames" "$TMP/r2/frames" 2>&1 | head -2)"
+fi
+# Three views side by side (camera = {views = ...}): each third shows the tissue's cut face.
+sed 's/^    name = "tutorial",/    name = "tutorial", camera = { views = { "side", "top", "axis" }, fps = 10 },/' \
+    "$TUT" >"$TMP/views.lua"
+"$BIN" run "$TMP/views.lua" -o "$TMP/rv" --frames --width 480 --height 160 --steps 40 \
+    --frame-every 40 --quiet >/dev/null 2>"$TMP/err_rv"
+rc=$?
+if [ $rc = 0 ] && python3 - "$TMP/rv" <<'PY' >"$TMP/py_rv" 2>&1; then
+import json, struct, sys, zlib
+d = sys.argv[1]
+r = json.load(open(d + "/report.json"))
+assert r["render"]["frames"] == 2 and r["render"]["fps"] == 10, r["render"]
+# decode the last frame (8-bit RGB, non-interlaced, as render/image.c writes it)
+data = open(d + "/frames/000001.png", "rb").read()
+pos, idat, w, h = 8, b"", 0, 0
+while pos < len(data):
+    n, kind = struct.unpack(">I4s", data[pos:pos + 8])
+    body = data[pos + 8:pos + 8 + n]
+    if kind == b"IHDR":
+        w, h, depth, ctype, _, _, lace = struct.unpack(">IIBBBBB", body)
+        assert depth == 8 and ctype == 2 and lace == 0
+    elif kind == b"IDAT":
+        idat += body
+    pos += 12 + n
+raw, rows, prev = zlib.decompress(idat), [], bytearray(3 * w)
+for y in range(h):
+    f, line = raw[y * (3 * w + 1)], bytearray(raw[y * (3 * w + 1) + 1:(y + 1) * (3 * w + 1)])
+    for i in range(3 * w):
+        a = line[i - 3] if i >= 3 else 0
+        b = prev[i]
+        c = prev[i - 3] if i >= 3 else 0
+        if f == 1: line[i] = (line[i] + a) & 255
+        elif f == 2: line[i] = (line[i] + b) & 255
+        elif f == 3: line[i] = (line[i] + (a + b) // 2) & 255
+        elif f == 4:
+            p = a + b - c
+            pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+            line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+    rows.append(line)
+    prev = line
+assert (w, h) == (480, 160), (w, h)
+gel = (228, 178, 164)  # region 0's cut-face colour (render/scene.c)
+counts = [0, 0, 0]
+for y in range(h):
+    for x in range(w):
+        px = rows[y][3 * x:3 * x + 3]
+        if all(abs(px[k] - gel[k]) <= 4 for k in range(3)):
+            counts[min(2, x * 3 // w)] += 1
+assert min(counts) > 500, counts
+print("gel-coloured pixels per view: %s" % counts)
+PY
+    pass "three views side by side each show the cut face ($(cat "$TMP/py_rv"))"
+else
+    fail "three views" "exit $rc: $(head -1 "$TMP/err_rv") $(tail -1 "$TMP/py_rv" 2>/dev/null)"
+fi
+"$BIN" run "$TUT" -o "$TMP/r3" --no-render --quiet >/dev/null 2>&1
+if [ -f "$TMP/r3/report.json" ] && [ ! -e "$TMP/r3/summary.png" ]; then pass "--no-render: no pictures"; else fail "--no-render" "$(ls "$TMP/r3")"; fi
+mkdir -p "$TMP/nobin"
+for t in env python3; do ln -sf "$(command -v $t)" "$TMP/nobin/$t"; done
+PATH="$TMP/nobin" "$BIN" run "$TUT" -o "$TMP/r4" --video "$TMP/r4.mp4" >/dev/null 2>"$TMP/err_r4"
+rc=$?
+if [ $rc = 1 ] && grep -q "ffmpeg" "$TMP/err_r4" && [ ! -e "$TMP/r4" ] && [ ! -e "$TMP/r4.mp4" ]; then
+    pass "--video without ffmpeg: exit 1, says so, writes nothing"
+else
+    fail "--video without ffmpeg" "exit $rc: $(head -1 "$TMP/err_r4"); $(ls "$TMP/r4" 2>&1)"
+fi
+"$BIN" run "$TUT" -o "$TMP/r5" --width 321 >/dev/null 2>"$TMP/err_r5"
+rc=$?
+if [ $rc = 2 ] && grep -q -- "--width" "$TMP/err_r5"; then pass "odd --width: exit 2"; else fail "odd --width" "exit $rc"; fi
+"$BIN" run "$TUT" -o "$TMP/r6" --video "$TMP/r6.avi" >/dev/null 2>"$TMP/err_r6"
+rc=$?
+if [ $rc = 2 ] && grep -q "mp4" "$TMP/err_r6"; then pass "--video not .mp4: exit 2"; else fail "--video .avi" "exit $rc"; fi
 
 echo "$PASSED passed, $FAILED failed"
 [ "$FAILED" = 0 ]

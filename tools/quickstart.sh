@@ -14,9 +14,11 @@ mode="${1:-run}"
 # --- 1. Debian packages (only those missing; apt runs only if something is) ---------------------
 # libopenblas-dev: CHOLMOD is ~8x faster on OpenBLAS than on the reference BLAS (DESIGN.md);
 # the build links it explicitly (meson.build), so the choice does not rest on
-# update-alternatives. ffmpeg encodes the debrief videos.
+# update-alternatives. Rendering: EGL and libOpenGL (glvnd) with Mesa's llvmpipe for machines
+# without a GPU, FreeType and the DejaVu font for the frames' text, ffmpeg for the videos.
 packages=(gcc pkg-config meson ninja-build liblua5.4-dev libsuitesparse-dev libmetis-dev
-          libopenblas-dev libpng-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri ffmpeg)
+          libopenblas-dev libpng-dev libegl-dev libopengl-dev libgl-dev libegl-mesa0
+          libgl1-mesa-dri libfreetype-dev fonts-dejavu-core ffmpeg python3)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -54,8 +56,9 @@ run)
     mkdir -p "$out"
     ./build/needlesim check scenarios/brachytherapy.lua --mesh-out "$out/tissue.vtu"
     echo "mesh written to $out/tissue.vtu" >&2
-    # The run: the needle in, two seeds, out; the report and trajectory (no video yet: issue 8).
-    ./build/needlesim run scenarios/brachytherapy.lua -o "$out"
+    # The run: two needles, four seeds; the report, the trajectory, the debrief video and its
+    # contact sheet (summary.png).
+    ./build/needlesim run scenarios/brachytherapy.lua -o "$out" --video "$out/brachytherapy.mp4"
     ;;
 test)
     passed=0; failed=0

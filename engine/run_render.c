@@ -1,0 +1,418 @@
+/* Frames, video and contact sheet of a run (run_render.h). */
+#include "run_render.h"
+
+#include <dirent.h>
+#include <stdbool.h>
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "err.h"
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* CPU seconds of the waited-for child processes (ffmpeg). */
+static double children_cpu_s(void)
+{
+    struct rusage ru;
+    if (getrusage(RUSAGE_CHILDREN, &ru) != 0)
+        return 0.0;
+    return (double)ru.ru_utime.tv_sec + 1e-6 * (double)ru.ru_utime.tv_usec +
+           (double)ru.ru_stime.tv_sec + 1e-6 * (double)ru.ru_stime.tv_usec;
+}
+
+static char *join(const char *dir, const char *name, const char *suffix)
+{
+    size_t n = strlen(dir) + strlen(name) + strlen(suffix) + 2;
+    char *p = malloc(n);
+    if (p)
+        snprintf(p, n, "%s/%s%s", dir, name, suffix);
+    return p;
+}
+
+static char *dup_suffix(const char *path, const char *suffix)
+{
+    size_t n = strlen(path) + strlen(suffix) + 1;
+    char *p = malloc(n);
+    if (p)
+        snprintf(p, n, "%s%s", path, suffix);
+    return p;
+}
+
+/* A frame's file name: NNNNNN.png (six digits). */
+static bool is_frame_name(const char *name)
+{
+    return strlen(name) == 10 && strcmp(name + 6, ".png") == 0 && strspn(name, "0123456789") == 6;
+}
+
+/* Whether dir holds only frames (1), is missing (0), or holds something else or cannot be
+ * read (-1). */
+static int frames_only(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (!d)
+        return errno == ENOENT ? 0 : -1;
+    struct dirent *e;
+    int rc = 1;
+    while (rc == 1 && (e = readdir(d)))
+        if (strcmp(e->d_name, ".") != 0 && strcmp(e->d_name, "..") != 0 &&
+            !is_frame_name(e->d_name))
+            rc = -1;
+    closedir(d);
+    return rc;
+}
+
+/* Removes the NNNNNN.png files in dir and dir itself (if it then is empty). */
+static int remove_frames_dir(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (!d)
+        return errno == ENOENT ? 0 : -1;
+    struct dirent *e;
+    size_t n = strlen(dir);
+    char path[4096];
+    while ((e = readdir(d))) {
+        size_t len = strlen(e->d_name);
+        if (!is_frame_name(e->d_name) || n + len + 2 > sizeof path)
+            continue;
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        remove(path);
+    }
+    closedir(d);
+    return rmdir(dir);
+}
+
+int ns_run_render_clear_old(const char *out_dir, bool frames, char *err, int err_sz)
+{
+    char *sheet = join(out_dir, "summary.png", ""), *dir = join(out_dir, "frames", "");
+    int rc = 0;
+    if (!sheet || !dir) {
+        ns_set_err(err, err_sz, "out of memory");
+        rc = -1;
+    } else {
+        int only = frames_only(dir);
+        if (only < 0 && frames) {
+            ns_set_err(err, err_sz,
+                       "--frames: '%s' holds files other than frames (NNNNNN.png): move them "
+                       "or write to another folder",
+                       dir);
+            rc = -1;
+        } else {
+            remove(sheet);
+            if (only > 0)
+                remove_frames_dir(dir);
+        }
+    }
+    free(sheet);
+    free(dir);
+    return rc;
+}
+
+int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int err_sz)
+{
+    memset(rr, 0, sizeof *rr);
+    rr->o = *o;
+    if (o->video && !ns_video_have_ffmpeg()) {
+        ns_set_err(err, err_sz,
+                   "--video needs the ffmpeg program (apt install ffmpeg): not found on PATH");
+        return -1;
+    }
+    if (o->frames) {
+        rr->frames_dir = join(o->out_dir, "frames", "");
+        rr->frames_tmp = join(o->out_dir, "frames", ".part");
+        if (!rr->frames_dir || !rr->frames_tmp) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        remove_frames_dir(rr->frames_tmp); /* a crashed run's leftovers */
+        if (mkdir(rr->frames_tmp, 0777) != 0) {
+            ns_set_err(err, err_sz, "cannot make the frames folder '%s': %s", rr->frames_tmp,
+                       strerror(errno));
+            return -1;
+        }
+    }
+    if (o->summary) {
+        rr->summary_path = join(o->out_dir, "summary.png", "");
+        rr->summary_tmp = join(o->out_dir, "summary.png", ".part");
+        if (!rr->summary_path || !rr->summary_tmp) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+    }
+    if (ns_frame_open(&rr->frame, o->width, o->height, err, err_sz))
+        return -1;
+    if (o->video) {
+        rr->video_tmp = dup_suffix(o->video, ".part");
+        if (!rr->video_tmp) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        rr->children_cpu0 = children_cpu_s();
+        rr->video = ns_video_open(rr->video_tmp, o->width, o->height, o->fps, err, err_sz);
+        if (!rr->video)
+            return -1;
+    }
+    return 0;
+}
+
+static int push_timing(NsRunRender *rr, double render_ms, double encode_ms)
+{
+    if (rr->frame_count >= rr->timing_cap) {
+        long cap = rr->timing_cap ? 2 * rr->timing_cap : 256;
+        double *a = realloc(rr->render_ms, (size_t)cap * sizeof *a);
+        if (a)
+            rr->render_ms = a;
+        double *b = a ? realloc(rr->encode_ms, (size_t)cap * sizeof *b) : NULL;
+        if (b)
+            rr->encode_ms = b;
+        if (!a || !b)
+            return -1;
+        rr->timing_cap = cap;
+    }
+    rr->render_ms[rr->frame_count] = render_ms;
+    rr->encode_ms[rr->frame_count] = encode_ms;
+    rr->frame_count++;
+    return 0;
+}
+
+int ns_run_render_frame(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
+                        char *err, int err_sz)
+{
+    if (!rr->o.frames && !rr->o.video)
+        return 0;
+    if (rr->frame_count >= 1000000) {
+        ns_set_err(err, err_sz, "more than 999,999 frames: give a larger --frame-every");
+        return -1;
+    }
+    double t0 = now_s();
+    if (ns_frame_render(&rr->frame, in, rr->o.views, rr->o.nviews, hud, nhud, rr->o.legend,
+                        &rr->image, err, err_sz))
+        return -1;
+    double t1 = now_s();
+    if (rr->o.frames) {
+        char name[32];
+        snprintf(name, sizeof name, "%06ld.png", rr->frame_count);
+        char *path = join(rr->frames_tmp, name, "");
+        int rc = path ? ns_image_write_png(&rr->image, path, err, err_sz) : -1;
+        if (!path)
+            ns_set_err(err, err_sz, "out of memory");
+        free(path);
+        if (rc)
+            return -1;
+    }
+    if (rr->video && ns_video_frame(rr->video, &rr->image, err, err_sz))
+        return -1;
+    double t2 = now_s();
+    rr->render_s += t2 - t0;
+    if (push_timing(rr, 1e3 * (t1 - t0), 1e3 * (t2 - t1))) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    return 0;
+}
+
+int ns_run_render_moment(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
+                         const char *caption, bool final, char *err, int err_sz)
+{
+    if (!rr->o.summary)
+        return 0;
+    int slot = rr->moment_count;
+    if (final)
+        slot = slot < NS_RUN_MOMENTS ? slot : NS_RUN_MOMENTS - 1;
+    else if (slot >= NS_RUN_MOMENTS - 1)
+        return 0; /* the sheet is full: the last slot is the end's */
+    double t0 = now_s();
+    if (ns_frame_render(&rr->frame, in, rr->o.views, rr->o.nviews, hud, nhud, false, &rr->image,
+                        err, err_sz))
+        return -1;
+    NsRunMoment *m = &rr->moments[slot];
+    int tw = rr->o.width / 3, th = rr->o.height / 3;
+    if (!m->thumb.rgb && ns_image_alloc(&m->thumb, tw, th, err, err_sz))
+        return -1;
+    ns_image_blit_scaled(&m->thumb, 0, 0, tw, th, &rr->image);
+    snprintf(m->caption, sizeof m->caption, "%s", caption);
+    if (slot == rr->moment_count)
+        rr->moment_count++;
+    rr->render_s += now_s() - t0;
+    return 0;
+}
+
+/* The sheet: a title, the moments three a row with their captions, the score table. */
+static int write_sheet(NsRunRender *rr, const char *title, const char *const *table, int rows,
+                       char *err, int err_sz)
+{
+    static const uint8_t bg[3] = {24, 27, 34}, fg[3] = {235, 238, 242}, dim[3] = {170, 178, 190};
+    NsFont *big = ns_font_open(28, 0, err, err_sz);
+    NsFont *small = big ? ns_font_open(17, 0, err, err_sz) : NULL;
+    NsFont *mono = small ? ns_font_open(17, 1, err, err_sz) : NULL;
+    if (!mono) {
+        ns_font_close(small);
+        ns_font_close(big);
+        return -1;
+    }
+    int n = rr->moment_count, cols = n < 3 ? (n > 0 ? n : 1) : 3, rows_m = (n + cols - 1) / cols;
+    int tw = rr->o.width / 3, th = rr->o.height / 3, pad = 16;
+    int cap_h = ns_font_line_height(small) + 8, lh = ns_font_line_height(mono);
+    int title_h = ns_font_line_height(big) + 2 * pad;
+    int W = 3 * tw + 4 * pad, H = title_h + rows_m * (th + cap_h + pad) + pad + rows * lh + pad;
+    int wt = ns_font_measure(big, title) + 2 * pad;
+    W = wt > W ? wt : W;
+    for (int i = 0; i < rows; i++) {
+        int wr = ns_font_measure(mono, table[i]) + 2 * pad;
+        W = wr > W ? wr : W;
+    }
+    NsImage sheet = {0};
+    if (ns_image_alloc(&sheet, W, H, err, err_sz)) {
+        ns_font_close(mono);
+        ns_font_close(small);
+        ns_font_close(big);
+        return -1;
+    }
+    ns_image_fill(&sheet, bg);
+    ns_font_draw(big, &sheet, pad, pad + ns_font_ascent(big), title, fg);
+    for (int i = 0; i < n; i++) {
+        int x = pad + (i % cols) * (tw + pad), y = title_h + (i / cols) * (th + cap_h + pad);
+        ns_image_blit_scaled(&sheet, x, y, tw, th, &rr->moments[i].thumb);
+        char label[112];
+        snprintf(label, sizeof label, "%d. %s", i + 1, rr->moments[i].caption);
+        ns_font_draw(small, &sheet, x, y + th + 4 + ns_font_ascent(small), label, dim);
+    }
+    int y0 = title_h + rows_m * (th + cap_h + pad) + pad;
+    for (int i = 0; i < rows; i++)
+        ns_font_draw(mono, &sheet, pad, y0 + i * lh + ns_font_ascent(mono), table[i], fg);
+    int rc = ns_image_write_png(&sheet, rr->summary_tmp, err, err_sz);
+    ns_image_free(&sheet);
+    ns_font_close(mono);
+    ns_font_close(small);
+    ns_font_close(big);
+    return rc;
+}
+
+int ns_run_render_finish(NsRunRender *rr, const char *title, const char *const *table, int rows,
+                         char *err, int err_sz)
+{
+    double t0 = now_s();
+    if (rr->o.summary && write_sheet(rr, title, table, rows, err, err_sz))
+        return -1;
+    if (rr->video) {
+        NsVideo *v = rr->video;
+        rr->video = NULL;
+        if (ns_video_close(v, err, err_sz))
+            return -1;
+        rr->ffmpeg_cpu_s = children_cpu_s() - rr->children_cpu0;
+    }
+    rr->render_s += now_s() - t0;
+    return 0;
+}
+
+int ns_run_render_commit(NsRunRender *rr, char *err, int err_sz)
+{
+    /* Each rename is recorded, so that a failure here or after (the control log) takes every
+     * picture back out (ns_run_render_uncommit). */
+    if (rr->o.frames) {
+        remove_frames_dir(rr->frames_dir); /* frames only: ns_run_render_clear_old checked */
+        if (rename(rr->frames_tmp, rr->frames_dir) != 0) {
+            ns_set_err(err, err_sz, "cannot write '%s': %s", rr->frames_dir, strerror(errno));
+            return -1;
+        }
+        rr->committed |= 1;
+    }
+    if (rr->o.video) {
+        if (rename(rr->video_tmp, rr->o.video) != 0) {
+            ns_set_err(err, err_sz, "cannot write '%s': %s", rr->o.video, strerror(errno));
+            ns_run_render_uncommit(rr);
+            return -1;
+        }
+        rr->committed |= 2;
+    }
+    if (rr->o.summary) {
+        if (rename(rr->summary_tmp, rr->summary_path) != 0) {
+            ns_set_err(err, err_sz, "cannot write '%s': %s", rr->summary_path, strerror(errno));
+            ns_run_render_uncommit(rr);
+            return -1;
+        }
+        rr->committed |= 4;
+    }
+    return 0;
+}
+
+void ns_run_render_uncommit(NsRunRender *rr)
+{
+    if (rr->committed & 1)
+        remove_frames_dir(rr->frames_dir);
+    if (rr->committed & 2)
+        remove(rr->o.video);
+    if (rr->committed & 4)
+        remove(rr->summary_path);
+    rr->committed = 0;
+}
+
+void ns_run_render_abort(NsRunRender *rr)
+{
+    ns_run_render_uncommit(rr);
+    if (rr->video) {
+        ns_video_abort(rr->video);
+        rr->video = NULL;
+    }
+    if (rr->video_tmp)
+        remove(rr->video_tmp);
+    if (rr->summary_tmp)
+        remove(rr->summary_tmp);
+    if (rr->frames_tmp)
+        remove_frames_dir(rr->frames_tmp);
+    ns_run_render_free(rr);
+}
+
+void ns_run_render_free(NsRunRender *rr)
+{
+    if (rr->video)
+        ns_video_abort(rr->video);
+    ns_frame_close(&rr->frame);
+    ns_image_free(&rr->image);
+    for (int i = 0; i < NS_RUN_MOMENTS; i++)
+        ns_image_free(&rr->moments[i].thumb);
+    free(rr->frames_tmp);
+    free(rr->frames_dir);
+    free(rr->video_tmp);
+    free(rr->summary_tmp);
+    free(rr->summary_path);
+    free(rr->render_ms);
+    free(rr->encode_ms);
+    memset(rr, 0, sizeof *rr);
+}
+
+static int cmp(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double median(const double *v, long n)
+{
+    if (n <= 0)
+        return 0.0;
+    double *c = malloc((size_t)n * sizeof *c);
+    if (!c)
+        return 0.0;
+    memcpy(c, v, (size_t)n * sizeof *c);
+    qsort(c, (size_t)n, sizeof *c, cmp);
+    double m = n % 2 ? c[n / 2] : 0.5 * (c[n / 2 - 1] + c[n / 2]);
+    free(c);
+    return m;
+}
+
+void ns_run_render_medians(const NsRunRender *rr, double *render_ms, double *encode_ms)
+{
+    *render_ms = median(rr->render_ms, rr->frame_count);
+    *encode_ms = median(rr->encode_ms, rr->frame_count);
+}

@@ -1,0 +1,74 @@
+/* The run's pictures (issue 8): frames (DIR/frames/NNNNNN.png), the video (ffmpeg, H.264) and
+ * the debrief contact sheet (DIR/summary.png: the key moments and the score table). Everything
+ * is written under temporary names and renamed by ns_run_render_commit, so a failed run leaves
+ * none of it. */
+#ifndef NS_RUN_RENDER_H
+#define NS_RUN_RENDER_H
+
+#include <stdbool.h>
+
+#include "frame.h"
+#include "video.h"
+
+typedef struct NsRunRenderOpts {
+    const char *out_dir;
+    bool frames;       /* DIR/frames/NNNNNN.png */
+    const char *video; /* an .mp4 path, or NULL */
+    bool summary;      /* DIR/summary.png */
+    int width, height; /* even */
+    double fps;
+    int views[3], nviews;
+    bool legend; /* the friction-state colour key */
+} NsRunRenderOpts;
+
+typedef struct NsRunMoment {
+    NsImage thumb;
+    char caption[96];
+} NsRunMoment;
+
+enum { NS_RUN_MOMENTS = 12 };
+
+typedef struct NsRunRender {
+    NsRunRenderOpts o;
+    NsFrame frame;
+    NsImage image;
+    NsVideo *video;
+    char *frames_tmp, *frames_dir, *video_tmp, *summary_tmp, *summary_path;
+    long frame_count;
+    NsRunMoment moments[NS_RUN_MOMENTS];
+    int moment_count;
+    double *render_ms, *encode_ms; /* per frame */
+    long timing_cap;
+    double render_s; /* all rendering and encoding, moments and sheet included [s] */
+    double children_cpu0, ffmpeg_cpu_s; /* ffmpeg's CPU time (it encodes on another core) */
+    int committed; /* bits: frames (1), video (2), sheet (4) renamed into place */
+} NsRunRender;
+
+/* Before a run writes anything in out_dir: removes an earlier run's summary.png and frames/
+ * (only if it holds nothing but NNNNNN.png files). With frames (the run will write frames/),
+ * a frames/ holding other files is an error, and nothing is removed. */
+int ns_run_render_clear_old(const char *out_dir, bool frames, char *err, int err_sz);
+/* Opens the renderer (and ffmpeg for a video). Nothing is written yet. */
+int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int err_sz);
+/* A frame of the run to the frames folder and the video. */
+int ns_run_render_frame(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
+                        char *err, int err_sz);
+/* A key moment for the contact sheet (the last of NS_RUN_MOMENTS slots is kept for the end:
+ * later moments past the others are dropped, `final` always replaces the last). */
+int ns_run_render_moment(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
+                         const char *caption, bool final, char *err, int err_sz);
+/* Writes the contact sheet and closes the video, under their temporary names. */
+int ns_run_render_finish(NsRunRender *rr, const char *title, const char *const *table, int rows,
+                         char *err, int err_sz);
+/* Moves the frames folder, the video and the sheet to their names: all or none. */
+int ns_run_render_commit(NsRunRender *rr, char *err, int err_sz);
+/* Removes what ns_run_render_commit put in place (a later output failed). */
+void ns_run_render_uncommit(NsRunRender *rr);
+/* Removes whatever was written, committed or not (a failed run), and frees. */
+void ns_run_render_abort(NsRunRender *rr);
+void ns_run_render_free(NsRunRender *rr);
+/* Median milliseconds a frame took to render (draw and read back, HUD included) and to encode
+ * (PNG and video). */
+void ns_run_render_medians(const NsRunRender *rr, double *render_ms, double *encode_ms);
+
+#endif
