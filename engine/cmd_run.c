@@ -188,7 +188,9 @@ typedef struct Run {
     bool *reached;     /* per target: the tip-reached moment was taken */
     double peak_axial; /* the axial force's peak since the last puncture (moments) */
     int punctures;
-    double end_s; /* the run's end: last frame, contact sheet, video closed [s] */
+    double end_s;   /* the run's end: last frame, contact sheet, video closed [s] */
+    Series tips[3]; /* bench --compare: the tip after every step [m] */
+    bool log_tips;
 } Run;
 
 static double dot3(const double *a, const double *b)
@@ -300,6 +302,12 @@ static int place_needle(Run *r, const char *what, char *err, int err_sz)
     cp.remesh = 1;
     cp.solver = (NsCoupledSolverKind)r->opt.solver;
     cp.threads = r->opt.threads;
+    if (sp->tolerance > 0.0) /* the scenario's solver = {...} */
+        cp.tau_sol = sp->tolerance;
+    if (sp->check_tolerance > 0.0)
+        cp.tau_check = sp->check_tolerance;
+    if (sp->tolerance > 0.0 && cp.tau_check < cp.tau_sol)
+        cp.tau_check = cp.tau_sol;
     for (int k = 0; k < sc->region_count; k++)
         cp.cut_force[k] = sc->regions[k].material.cut_force;
     /* One friction per unit length for the whole needle: that of the region at the entry. */
@@ -347,6 +355,8 @@ static int build(Run *r, char *err, int err_sz)
     tp.gamma = 0.55; /* slightly dissipative Newmark, as the validation's coupled cases */
     tp.beta = 0.25 * 1.05 * 1.05;
     tp.threads = r->opt.threads;
+    if (sp->lazy_threshold >= 0.0)
+        tp.lazy_threshold = sp->lazy_threshold;
     if (ns_scenario_tissue(sc, &tp, &r->tissue, err, err_sz))
         return -1;
     r->have_tissue = true;
@@ -933,6 +943,32 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_string(&j, ns_coupled_solver_name((NsCoupledSolverKind)r->opt.solver));
     ns_json_key(&j, "threads");
     ns_json_int(&j, r->opt.threads);
+    ns_json_key(&j, "solver_settings"); /* what the step ran with (the scenario's solver = {}) */
+    ns_json_begin_object(&j);
+    ns_json_key(&j, "tolerance");
+    ns_json_number(&j, r->c.params.tau_sol);
+    ns_json_key(&j, "check_tolerance");
+    ns_json_number(&j, r->c.params.tau_check);
+    ns_json_key(&j, "lazy_threshold");
+    ns_json_number(&j, r->tissue.params.lazy_threshold);
+    ns_json_end_object(&j);
+    if (r->spec.accuracy > 0.0) { /* the scenario's accuracy = ... (docs/performance.md) */
+        ns_json_key(&j, "accuracy");
+        ns_json_begin_object(&j);
+        ns_json_key(&j, "tip_m");
+        ns_json_number(&j, r->spec.accuracy);
+        ns_json_key(&j, "front");
+        ns_json_string(&j, r->spec.accuracy_front);
+        ns_json_key(&j, "chosen");
+        ns_json_string(&j, r->spec.accuracy_label);
+        ns_json_key(&j, "dt_s");
+        ns_json_number(&j, r->spec.dt);
+        ns_json_key(&j, "measured_tip_error_m");
+        ns_json_number(&j, r->spec.accuracy_tip_error);
+        ns_json_key(&j, "measured_cost_ms_per_s");
+        ns_json_number(&j, r->spec.accuracy_cost);
+        ns_json_end_object(&j);
+    }
     ns_json_key(&j, "sets");
     ns_json_begin_array(&j);
     for (int i = 0; i < r->opt.nsets; i++)
@@ -1660,6 +1696,11 @@ static int run_loop(Run *r, char *err, int err_sz)
             return -1;
         }
         const double *tip = tip_of(r);
+        if (r->log_tips && (series_push(&r->tips[0], tip[0]) || series_push(&r->tips[1], tip[1]) ||
+                            series_push(&r->tips[2], tip[2]))) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
         if (r->traj)
             fprintf(r->traj, "%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%d,%d,%d,%d",
                     (double)r->steps * sp->dt, tip[0], tip[1], tip[2], depth_of(r), st.axial_force,
@@ -1719,6 +1760,8 @@ static void run_free(Run *r)
                     &r->needle_ms, &r->remesh_ms, &r->trials, &r->iterations};
     for (int k = 0; k < 8; k++)
         free(s[k]->v);
+    for (int k = 0; k < 3; k++)
+        free(r->tips[k].v);
     free(r->target_hint);
     free(r->marker_hint);
     free(r->obst);
@@ -2019,7 +2062,7 @@ int ns_cmd_run(int argc, char **argv)
 
 static const char bench_usage[] =
     "usage: needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N]\n"
-    "                       [--set KEY=VALUE]... [--json]\n";
+    "                       [--set KEY=VALUE]... [--compare NAME] [--json]\n";
 
 static void bench_stats_json(NsJson *j, const Run *r)
 {
@@ -2045,19 +2088,101 @@ static void bench_stats_json(NsJson *j, const Run *r)
     stats_object(j, "cg_iterations", &r->iterations);
 }
 
+/* One bench run of o's scenario with the given solver into r (initialised here). */
+static int bench_run(const RunOpts *o, int solver, bool log_tips, Run *r, char *err, int err_sz)
+{
+    memset(r, 0, sizeof *r);
+    r->sim_ref = r->act_ref = r->co_ref = LUA_NOREF;
+    r->opt = *o;
+    r->opt.solver = solver;
+    r->log_tips = log_tips;
+    int rc = -1;
+    if (ns_scenario_load_set(o->scenario, o->sets, o->nsets, &r->sc, err, err_sz) == 0) {
+        r->have_sc = true;
+        if (ns_run_spec_read(&r->sc, &r->spec, err, err_sz) == 0) {
+            r->have_spec = true;
+            rc = 0;
+        }
+    }
+    r->stop_when_done = rc == 0 && r->spec.has_script; /* a script's end ends a bench early */
+    rc = rc ? rc : script_start(r, err, err_sz);
+    rc = rc ? rc : build(r, err, err_sz);
+    rc = rc ? rc : run_loop(r, err, err_sz);
+    if (rc == 0 && r->steps == 0) {
+        ns_set_err(err, err_sz, "%s: the script ended before the first step: nothing to time",
+                   r->sc.path);
+        rc = -1;
+    }
+    return rc;
+}
+
+static void bench_table(const Run *r)
+{
+    double lo, mean, hi, ilo, imean, ihi;
+    series_range(&r->trials, &lo, &mean, &hi);
+    series_range(&r->iterations, &ilo, &imean, &ihi);
+    printf("%s: %d tets, %d nodes; solver %s, %d thread(s), %ld steps of %g ms\n", r->sc.name,
+           r->tissue.mesh.tet_alive, r->tissue.mesh.node_alive,
+           ns_coupled_solver_name((NsCoupledSolverKind)r->opt.solver), r->opt.threads, r->steps,
+           1e3 * r->spec.dt);
+    printf("median ms per step (the paper's Table 2):\n");
+    printf("  %8s %8s %8s %8s %8s\n", "Total", "LCP", "Tissue", "Needle", "Remesh");
+    printf("  %8.2f %8.2f %8.2f %8.2f %8.2f\n", series_quantile(&r->total_ms, 0.5),
+           series_quantile(&r->lcp_ms, 0.5), series_quantile(&r->tissue_ms, 0.5),
+           series_quantile(&r->needle_ms, 0.5), series_quantile(&r->remesh_ms, 0.5));
+    printf("step wall time: median %.2f ms, p95 %.2f ms, max %.2f ms\n",
+           series_quantile(&r->step_ms, 0.5), series_quantile(&r->step_ms, 0.95),
+           series_quantile(&r->step_ms, 1.0));
+    printf("per step (the paper's Table 3): LCP trials %.0f / %.2f / %.0f, CG iterations "
+           "%.0f / %.1f / %.0f (min / mean / max)\n",
+           lo, mean, hi, ilo, imean, ihi);
+}
+
+static void bench_json_fields(NsJson *j, const Run *r)
+{
+    ns_json_key(j, "steps");
+    ns_json_int(j, r->steps);
+    ns_json_key(j, "tets");
+    ns_json_int(j, r->tissue.mesh.tet_alive);
+    ns_json_key(j, "nodes");
+    ns_json_int(j, r->tissue.mesh.node_alive);
+    bench_stats_json(j, r);
+}
+
+/* The largest distance between the two runs' tips over the steps both made [m]; *steps the
+ * number compared. */
+static double tip_difference(const Run *a, const Run *b, long *steps)
+{
+    long n = a->tips[0].n < b->tips[0].n ? a->tips[0].n : b->tips[0].n;
+    double worst = 0.0;
+    for (long k = 0; k < n; k++) {
+        double d2 = 0.0;
+        for (int i = 0; i < 3; i++) {
+            double d = a->tips[i].v[k] - b->tips[i].v[k];
+            d2 += d * d;
+        }
+        worst = fmax(worst, sqrt(d2));
+    }
+    *steps = n;
+    return worst;
+}
+
 /* needlesim bench SCENARIO.lua: the scenario's script for --steps steps (default 200, fewer if
  * the script ends first), nothing written; the per-stage medians in the form of the paper's
  * Table 2 (Total, LCP, Tissue, Needle, Remesh) and the LCP trials and CG iterations of its
- * Table 3. Speed against the paper's solver in the same process (--compare paper) is issue 9. */
+ * Table 3. With --compare paper the same run again with the paper's solver, in this process:
+ * both tables, the ratio of their median step times, and whether the two tips stayed within
+ * 0.05 mm of each other at every step (exit 1 if not). */
 int ns_cmd_bench(int argc, char **argv)
 {
-    Run r;
-    memset(&r, 0, sizeof r);
-    r.sim_ref = r.act_ref = r.co_ref = LUA_NOREF;
-    r.opt.threads = 1;
-    r.opt.solver = NS_COUPLED_SCHUR;
-    r.opt.quiet = true;
+    RunOpts o;
+    memset(&o, 0, sizeof o);
+    o.threads = 1;
+    o.solver = NS_COUPLED_SCHUR;
+    o.quiet = true;
+    o.no_render = true;
     bool json = false;
+    int compare = -1;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -2066,33 +2191,35 @@ int ns_cmd_bench(int argc, char **argv)
             return 0;
         } else if (strcmp(a, "--json") == 0) {
             json = true;
-        } else if (strcmp(a, "--compare") == 0) {
-            fprintf(stderr, "needlesim bench: --compare is not available in this version yet\n");
-            return 2;
         } else if (strcmp(a, "--steps") == 0 || strcmp(a, "--threads") == 0 ||
-                   strcmp(a, "--solver") == 0 || strcmp(a, "--set") == 0) {
+                   strcmp(a, "--solver") == 0 || strcmp(a, "--set") == 0 ||
+                   strcmp(a, "--compare") == 0) {
             if (!v) {
                 fprintf(stderr, "needlesim bench: %s needs a value\n%s", a, bench_usage);
                 return 2;
             }
             i++;
             char *end;
-            if (strcmp(a, "--solver") == 0) {
-                r.opt.solver = ns_coupled_solver_parse(v);
-                if (r.opt.solver < 0) {
+            if (strcmp(a, "--solver") == 0 || strcmp(a, "--compare") == 0) {
+                int k = ns_coupled_solver_parse(v);
+                if (k < 0) {
                     fprintf(stderr,
-                            "needlesim bench: --solver '%s': unknown solver (schur or "
+                            "needlesim bench: %s '%s': unknown solver (schur or "
                             "paper)\n%s",
-                            v, bench_usage);
+                            a, v, bench_usage);
                     return 2;
                 }
+                if (strcmp(a, "--solver") == 0)
+                    o.solver = k;
+                else
+                    compare = k;
             } else if (strcmp(a, "--set") == 0) {
-                if (!strchr(v, '=') || v[0] == '=' || r.opt.nsets == 32) {
+                if (!strchr(v, '=') || v[0] == '=' || o.nsets == 32) {
                     fprintf(stderr, "needlesim bench: --set '%s': expected KEY=VALUE\n%s", v,
                             bench_usage);
                     return 2;
                 }
-                r.opt.sets[r.opt.nsets++] = v;
+                o.sets[o.nsets++] = v;
             } else {
                 long n = strtol(v, &end, 10);
                 if (*end || n < 1 || n > (strcmp(a, "--threads") == 0 ? 64 : 1000000)) {
@@ -2101,92 +2228,103 @@ int ns_cmd_bench(int argc, char **argv)
                     return 2;
                 }
                 if (strcmp(a, "--steps") == 0)
-                    r.opt.steps = n;
+                    o.steps = n;
                 else
-                    r.opt.threads = (int)n;
+                    o.threads = (int)n;
             }
         } else if (a[0] == '-' && a[1] != '\0') {
             fprintf(stderr, "needlesim bench: unknown option '%s'\n%s", a, bench_usage);
             return 2;
-        } else if (!r.opt.scenario) {
-            r.opt.scenario = a;
+        } else if (!o.scenario) {
+            o.scenario = a;
         } else {
             fprintf(stderr, "needlesim bench: one scenario only (got '%s' too)\n%s", a,
                     bench_usage);
             return 2;
         }
     }
-    if (!r.opt.scenario) {
+    if (!o.scenario) {
         fprintf(stderr, "needlesim bench: missing SCENARIO.lua\n%s", bench_usage);
         return 2;
     }
-    if (r.opt.steps == 0)
-        r.opt.steps = 200;
-    char err[1024] = "";
-    int rc = -1;
-    if (ns_scenario_load_set(r.opt.scenario, r.opt.sets, r.opt.nsets, &r.sc, err, sizeof err) ==
-        0) {
-        r.have_sc = true;
-        if (ns_run_spec_read(&r.sc, &r.spec, err, sizeof err) == 0) {
-            r.have_spec = true;
-            rc = 0;
-        }
+    if (compare >= 0 && compare == o.solver) {
+        fprintf(stderr, "needlesim bench: --compare %s: the same solver as the run's\n%s",
+                ns_coupled_solver_name((NsCoupledSolverKind)compare), bench_usage);
+        return 2;
     }
-    r.stop_when_done = rc == 0 && r.spec.has_script; /* a script's end ends a bench early */
-    rc = rc ? rc : script_start(&r, err, sizeof err);
-    rc = rc ? rc : build(&r, err, sizeof err);
-    rc = rc ? rc : run_loop(&r, err, sizeof err);
-    if (rc == 0 && r.steps == 0) {
-        ns_set_err(err, sizeof err, "%s: the script ended before the first step: nothing to time",
-                   r.sc.path);
-        rc = -1;
+    if (o.steps == 0)
+        o.steps = 200;
+    char err[1024] = "";
+    Run runs[2];
+    int nruns = compare >= 0 ? 2 : 1, rc = 0, made = 0;
+    for (int k = 0; k < nruns && rc == 0; k++) {
+        if (!json && !o.quiet)
+            fprintf(stderr, "running %s...\n", ns_coupled_solver_name(k ? compare : o.solver));
+        rc = bench_run(&o, k ? compare : o.solver, nruns == 2, &runs[k], err, sizeof err);
+        made = k + 1;
     }
     if (rc) {
-        size_t n = strlen(r.opt.scenario);
-        bool located = strncmp(err, "needlesim", 9) == 0 || strncmp(err, r.opt.scenario, n) == 0;
+        size_t n = strlen(o.scenario);
+        bool located = strncmp(err, "needlesim", 9) == 0 || strncmp(err, o.scenario, n) == 0;
         fprintf(stderr, "%s%s\n", located ? "" : "needlesim: ", err);
-        run_free(&r);
+        for (int k = 0; k < made; k++)
+            run_free(&runs[k]);
         return 1;
     }
-    const char *solver = ns_coupled_solver_name((NsCoupledSolverKind)r.opt.solver);
+    const Run *r = &runs[0];
+    long compared = 0;
+    double diff = nruns == 2 ? tip_difference(&runs[0], &runs[1], &compared) : 0.0;
+    bool agree = nruns == 1 || (diff <= 0.05e-3 && runs[0].steps == runs[1].steps);
+    double speedup = nruns == 2 ? series_quantile(&runs[1].step_ms, 0.5) /
+                                      fmax(series_quantile(&runs[0].step_ms, 0.5), 1e-12)
+                                : 1.0;
     if (json) {
         NsJson j;
         ns_json_init(&j, stdout, 1);
         ns_json_begin_object(&j);
         ns_json_key(&j, "scenario");
-        ns_json_string(&j, r.sc.name);
+        ns_json_string(&j, r->sc.name);
         ns_json_key(&j, "solver");
-        ns_json_string(&j, solver);
+        ns_json_string(&j, ns_coupled_solver_name((NsCoupledSolverKind)o.solver));
         ns_json_key(&j, "threads");
-        ns_json_int(&j, r.opt.threads);
-        ns_json_key(&j, "steps");
-        ns_json_int(&j, r.steps);
-        ns_json_key(&j, "tets");
-        ns_json_int(&j, r.tissue.mesh.tet_alive);
-        ns_json_key(&j, "nodes");
-        ns_json_int(&j, r.tissue.mesh.node_alive);
-        bench_stats_json(&j, &r);
+        ns_json_int(&j, o.threads);
+        bench_json_fields(&j, r);
+        if (nruns == 2) {
+            for (int k = 0; k < 2; k++) {
+                ns_json_key(&j, ns_coupled_solver_name((NsCoupledSolverKind)runs[k].opt.solver));
+                ns_json_begin_object(&j);
+                bench_json_fields(&j, &runs[k]);
+                ns_json_end_object(&j);
+            }
+            ns_json_key(&j, "speedup");
+            ns_json_number(&j, speedup);
+            ns_json_key(&j, "max_tip_difference_m");
+            ns_json_number(&j, diff);
+            ns_json_key(&j, "agree");
+            ns_json_bool(&j, agree);
+        }
         ns_json_end_object(&j);
         fputc('\n', stdout);
     } else {
-        double lo, mean, hi, ilo, imean, ihi;
-        series_range(&r.trials, &lo, &mean, &hi);
-        series_range(&r.iterations, &ilo, &imean, &ihi);
-        printf("%s: %d tets, %d nodes; solver %s, %d thread(s), %ld steps of %g ms\n", r.sc.name,
-               r.tissue.mesh.tet_alive, r.tissue.mesh.node_alive, solver, r.opt.threads, r.steps,
-               1e3 * r.spec.dt);
-        printf("median ms per step (the paper's Table 2):\n");
-        printf("  %8s %8s %8s %8s %8s\n", "Total", "LCP", "Tissue", "Needle", "Remesh");
-        printf("  %8.2f %8.2f %8.2f %8.2f %8.2f\n", series_quantile(&r.total_ms, 0.5),
-               series_quantile(&r.lcp_ms, 0.5), series_quantile(&r.tissue_ms, 0.5),
-               series_quantile(&r.needle_ms, 0.5), series_quantile(&r.remesh_ms, 0.5));
-        printf("step wall time: median %.2f ms, p95 %.2f ms, max %.2f ms\n",
-               series_quantile(&r.step_ms, 0.5), series_quantile(&r.step_ms, 0.95),
-               series_quantile(&r.step_ms, 1.0));
-        printf("per step (the paper's Table 3): LCP trials %.0f / %.2f / %.0f, CG iterations "
-               "%.0f / %.1f / %.0f (min / mean / max)\n",
-               lo, mean, hi, ilo, imean, ihi);
+        for (int k = 0; k < nruns; k++) {
+            if (k)
+                printf("\n");
+            bench_table(&runs[k]);
+        }
+        if (nruns == 2)
+            printf("\nspeed-up (median step of %s / median step of %s): %.2fx; tips within %.4f mm "
+                   "over %ld "
+                   "steps (want <= 0.05 mm)\n",
+                   ns_coupled_solver_name((NsCoupledSolverKind)compare),
+                   ns_coupled_solver_name((NsCoupledSolverKind)o.solver), speedup, 1e3 * diff,
+                   compared);
     }
-    run_free(&r);
-    return 0;
+    if (!agree)
+        fprintf(stderr,
+                "needlesim bench: the two solvers' tips differ by %.4f mm (%ld and %ld steps): "
+                "more than 0.05 mm\n",
+                1e3 * diff, runs[0].steps, runs[1].steps);
+    for (int k = 0; k < nruns; k++)
+        run_free(&runs[k]);
+    return agree ? 0 : 1;
 }

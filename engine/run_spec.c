@@ -298,6 +298,26 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     lua_settop(L, si);
     if (rc == 0)
         read_camera(L, si, &spec->camera);
+    spec->tolerance = spec->check_tolerance = spec->lazy_threshold = -1.0;
+    if (rc == 0 && raw_field(L, si, "solver") == LUA_TTABLE) {
+        int vi = lua_gettop(L);
+        spec->tolerance = num_field(L, vi, "tolerance", -1.0);
+        spec->check_tolerance = num_field(L, vi, "check_tolerance", -1.0);
+        spec->lazy_threshold = num_field(L, vi, "lazy_threshold", -1.0);
+    }
+    lua_settop(L, si);
+    if (rc == 0 && raw_field(L, si, "accuracy") == LUA_TTABLE) {
+        int ai = lua_gettop(L);
+        spec->accuracy = num_field(L, ai, "tip", 0.0);
+        spec->accuracy_tip_error = num_field(L, ai, "tip_error", 0.0);
+        spec->accuracy_cost = num_field(L, ai, "cost", 0.0);
+        char *f = str_field(L, ai, "front", ""), *l = str_field(L, ai, "label", "");
+        snprintf(spec->accuracy_front, sizeof spec->accuracy_front, "%s", f ? f : "");
+        snprintf(spec->accuracy_label, sizeof spec->accuracy_label, "%s", l ? l : "");
+        free(f);
+        free(l);
+    }
+    lua_settop(L, si);
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
     lua_settop(L, top);

@@ -60,6 +60,12 @@ typedef struct NsRunSpec {
     double duration; /* [s]: the scenario's, else 0 (until the script ends) */
     bool has_script, has_on_tick;
     NsRunCamera camera;
+    /* solver = {...}: <= 0 where the scenario leaves the engine's default */
+    double tolerance, check_tolerance, lazy_threshold;
+    /* accuracy = ...: the tip accuracy asked for [m] (0: none), the front's setting chosen and
+     * its measured tip error [m] and cost [ms per simulated s] */
+    double accuracy, accuracy_tip_error, accuracy_cost;
+    char accuracy_front[32], accuracy_label[96];
 } NsRunSpec;
 
 /* Reads sc's run fields. Returns 0, or -1 with one line naming the scenario's file and line

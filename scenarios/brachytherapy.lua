@@ -77,7 +77,14 @@ end
 return ns.scenario {
   name = "prostate brachytherapy",
   description = "Transperineal insertion into a synthetic male pelvis (paper Fig. 1).",
-  dt = 0.01,
+  dt = ns.param("dt", 0.01),
+  -- The engine's defaults, settable for tools/speed_accuracy.py (docs/performance.md).
+  solver = {
+    tolerance = ns.param("solver.tolerance", 1e-8),
+    -- checked a hundred times looser, as the paper does (1e-3 and 1e-5)
+    check_tolerance = math.min(0.5, 100 * ns.param("solver.tolerance", 1e-8)),
+    lazy_threshold = ns.param("solver.lazy_threshold", 1e-2),
+  },
   -- `needlesim run ... --set needle.kind=stiff` runs the stiff symmetric needle (ProsSS).
   needle = ns.needle { kind = ns.param("needle.kind", "flexible"), bevel_deg = 30 },
   entry = { point = { holes[1][1], holes[1][2], 0 }, direction = { 0, 0, 1 } },

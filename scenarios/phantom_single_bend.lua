@@ -21,7 +21,10 @@
 local ns = require "needlesim"
 local act = require "needlesim.actions"
 
-local h = 0.013 -- resolution [m]
+local h = 0.013 -- the lattice of the block's size and the entry [m]
+-- The mesh resolution is h / refine (refine 1: 13 mm, the paper's mesh size; 2: 6.5 mm; ...):
+-- `--set tissue.refine=2` refines the mesh at the same geometry (tools/speed_accuracy.py).
+local refine = ns.param("tissue.refine", 1)
 
 -- Fiducials on the top face (z = 3.9 cm), 1 cm either side of the needle's plane, every 2 cm.
 local markers = {}
@@ -36,11 +39,19 @@ return ns.scenario {
     tissue = ns.tissue.box {
         size = { 10 * h, 6 * h, 3 * h }, -- 13 x 7.8 x 3.9 cm
         origin = { 0, -3 * h, 0 }, -- the needle path is the x axis at y = 0, z = 1.95 cm
-        resolution = h,
+        resolution = h / refine,
         material = ns.materials.gel, -- a stand-in: see scripts/needlesim/materials.lua
         fixed_faces = { "xmax", "ymin", "ymax", "zmin" },
     },
-    dt = 0.01,
+    dt = ns.param("dt", 0.01),
+    -- The coupled solve's tolerances and the lazy-Jacobian threshold (the engine's defaults
+    -- unless set: docs/performance.md measures what they cost and give).
+    solver = {
+        tolerance = ns.param("solver.tolerance", 1e-8),
+        -- checked a hundred times looser, as the paper does (1e-3 and 1e-5)
+        check_tolerance = math.min(0.5, 100 * ns.param("solver.tolerance", 1e-8)),
+        lazy_threshold = ns.param("solver.lazy_threshold", 1e-2),
+    },
     -- The phantom needle: 0.83 mm nitinol, bevel tip (the paper's §4).
     needle = ns.needle { kind = "flexible", bevel_deg = ns.param("needle.bevel_deg", 30) },
     -- On a lattice line (z = 2 h = 2.6 cm), where the entry track can be laid into the mesh.

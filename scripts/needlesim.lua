@@ -874,7 +874,7 @@ local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "durati
     "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
     "accuracy", "solver" }
 -- Accepted now and checked by the stages that use them (later versions).
-local RESERVED = { "accuracy", "solver" }
+local RESERVED = {}
 
 local ENTRY_FIELDS = { "point", "direction", "bevel_toward" }
 local TARGET_FIELDS = { "name", "at", "tolerance" }
@@ -884,6 +884,95 @@ local SEED_FIELDS = { "target" }
 local CAMERA_FIELDS = { "views", "fps", "frame_every", "cut_normal", "tet_edges",
     "friction_colours" }
 local VIEWS = { side = true, top = true, axis = true }
+local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold" }
+local ACCURACY_FIELDS = { "tip", "front" }
+
+--- ns.economy(tip, front): the cheapest settings on a measured speed-against-accuracy front
+--- (scripts/needlesim/fronts.lua, written by tools/speed_accuracy.py) whose tip trajectory
+--- error stays within `tip` metres: {dt, refine, tolerance, lazy_threshold, tip_error, cost,
+--- label}. front: "phantom" (gel block, flexible bevel needle; the default) or
+--- "brachytherapy". Raises when no measured setting is accurate enough.
+function ns.economy(tip, front, where)
+    where = where or where_of(2)
+    front = front or "phantom"
+    if not is_finite(tip) or tip <= 0 then
+        raise(where, "ns.economy", fmt("the tip accuracy must be a number > 0 [m] (got %s)",
+            describe(tip)))
+    end
+    local fronts = require "needlesim.fronts"
+    local rows = fronts[front]
+    if type(front) ~= "string" or rows == nil then
+        local known = {}
+        for k in pairs(fronts) do
+            known[#known + 1] = k
+        end
+        sort(known)
+        raise(where, "ns.economy", fmt("no measured front '%s' (known: %s)", tostring(front),
+            concat(known, ", ")))
+    end
+    local best
+    for _, r in ipairs(rows) do -- sorted by cost
+        if r.tip_error <= tip then
+            return r
+        end
+        if not best or r.tip_error < best.tip_error then
+            best = r
+        end
+    end
+    raise(where, "ns.economy", fmt("accuracy %g m: no measured setting on the '%s' front "
+        .. "reaches it (the most accurate, %s, is %g m off the reference; "
+        .. "docs/performance.md)", tip, front, best and best.label or "none",
+        best and best.tip_error or 0))
+end
+
+-- accuracy = 0.5e-3 or {tip = 0.5e-3, front = "phantom"}: the engine runs with the cheapest
+-- measured dt and solver settings that keep the tip within it (ns.economy); the scenario then
+-- gives neither dt nor solver.
+local function accuracy_of(v, t, where)
+    if v == nil then
+        return nil
+    end
+    local tip, front = v, nil
+    if type(v) == "table" and not kind_of(v) then
+        local a = args(v, "ns.scenario: accuracy", where, ACCURACY_FIELDS)
+        tip = a:number("tip", GT0, "> 0 [m]")
+        front = a:string("front", "phantom")
+    elseif not is_finite(v) or v <= 0 then
+        raise(where, "ns.scenario", fmt("accuracy must be a number > 0 [m] or {tip, front} "
+            .. "(got %s)", describe(v)))
+    end
+    if t.dt ~= nil or t.solver ~= nil then
+        raise(where, "ns.scenario", "accuracy chooses dt and the solver settings from the "
+            .. "measured front: give accuracy, or dt and solver, not both")
+    end
+    local r = ns.economy(tip, front, where)
+    return { tip = tip, front = front or "phantom", label = r.label, dt = r.dt,
+        refine = r.refine, tolerance = r.tolerance, lazy_threshold = r.lazy_threshold,
+        tip_error = r.tip_error, cost = r.cost }
+end
+
+-- solver = {tolerance, check_tolerance, lazy_threshold}: the coupled solve's relative residuals
+-- (the paper's tau_sol and tau_check, §3.6.1) and the lazy-Jacobian threshold (§3.6.3). The
+-- engine's defaults (1e-8, 1e-6, 1e-2) when absent; docs/performance.md measures what they cost.
+local function solver_of(v, where)
+    if v == nil then
+        return nil
+    end
+    local a = args(v, "ns.scenario: solver", where, SOLVER_FIELDS)
+    local s = {
+        tolerance = a:number("tolerance", function(x) return x > 0 and x < 1 end, "in (0, 1)",
+            OPTIONAL),
+        check_tolerance = a:number("check_tolerance", function(x) return x > 0 and x < 1 end,
+            "in (0, 1)", OPTIONAL),
+        lazy_threshold = a:number("lazy_threshold", function(x) return x >= 0 and x < 1 end,
+            "in [0, 1)", OPTIONAL),
+    }
+    if s.tolerance and s.check_tolerance and s.check_tolerance < s.tolerance then
+        a:fail("check_tolerance (%g) must not be below tolerance (%g)", s.check_tolerance,
+            s.tolerance)
+    end
+    return s
+end
 
 -- camera = {views, fps, frame_every, cut_normal, tet_edges, friction_colours}: what the frames
 -- and the video show (docs/rendering.md). Defaults: the side view, 25 frames a second, a frame
@@ -1049,6 +1138,14 @@ function ns.scenario(t)
             raise(where, "ns.scenario", fmt("seeds[%d]: target '%s' is not one of the targets",
                 i, sd.target))
         end
+    end
+    sc.solver = solver_of(t.solver, where)
+    sc.accuracy = accuracy_of(t.accuracy, t, where)
+    if sc.accuracy then
+        local e = sc.accuracy
+        sc.dt = e.dt
+        sc.solver = { tolerance = e.tolerance, check_tolerance = math.min(0.5, 100 * e.tolerance),
+            lazy_threshold = e.lazy_threshold }
     end
     sc.camera = camera_of(t.camera, where, sc.dt or 0.01)
     for _, k in ipairs(RESERVED) do

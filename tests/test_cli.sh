@@ -159,8 +159,10 @@ fi
 
 expect_error "no command: usage, exit 2" 2 "usage:" --
 expect_error "unknown command: exit 2" 2 "unknown command 'frobnicate'" -- frobnicate
-expect_error "bench --compare not built yet: exit 2" 2 "--compare is not available" -- \
-    bench scenarios/tutorial.lua --compare paper
+expect_error "bench --compare with an unknown solver: exit 2" 2 "unknown solver" -- \
+    bench scenarios/tutorial.lua --compare fastest
+expect_error "bench --compare with the run's own solver: exit 2" 2 "the same solver" -- \
+    bench scenarios/tutorial.lua --compare schur
 expect_error "bench: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
     bench scenarios/tutorial.lua --bogus
 expect_error "check: unknown option, exit 2" 2 "unknown option '--bogus'" -- \
@@ -366,6 +368,15 @@ expect_error "camera: unknown view" 1 \
 expect_error "camera: misspelt field" 1 \
     "tests/data/bad_camera_field.lua:2: ns.scenario: camera: unknown field 'tet_edge'" \
     "did you mean 'tet_edges'" -- check tests/data/bad_camera_field.lua
+expect_error "solver: tolerance out of range" 1 \
+    "tests/data/bad_solver.lua:2: ns.scenario: solver: tolerance must be a number in (0, 1)" -- \
+    check tests/data/bad_solver.lua
+expect_error "accuracy and dt both given" 1 \
+    "tests/data/accuracy_and_dt.lua:2: ns.scenario: accuracy chooses dt" -- \
+    check tests/data/accuracy_and_dt.lua
+expect_error "accuracy no measured setting reaches" 1 \
+    "tests/data/accuracy_unreachable.lua:2: ns.economy: accuracy 1e-09 m: no measured setting" -- \
+    check tests/data/accuracy_unreachable.lua
 expect_error "misspelt field in ns.tissue.box" 1 \
     "tests/data/bad_box_field.lua:4: ns.tissue.box: unknown field 'resolutoin'" \
     "did you mean 'resolution'" -- check tests/data/bad_box_field.lua

@@ -363,6 +363,59 @@ else
     fail "bench --json" "exit $rc: $(head -1 "$TMP/err_b") $(tail -1 "$TMP/py_b")"
 fi
 
+# solver = {...} reaches the step (report.solver_settings); accuracy = ... runs with the measured
+# front's cheapest setting within it (report.accuracy, docs/performance.md).
+sed 's/^    name = "tutorial",/    name = "tutorial", solver = { tolerance = 1e-6, lazy_threshold = 0 },/' \
+    "$TUT" >"$TMP/solver.lua"
+sed 's/^    dt = 0.01, -- time step \[s\]$/    accuracy = 0.025,/' "$TUT" >"$TMP/accuracy.lua"
+"$BIN" run "$TMP/solver.lua" -o "$TMP/sv" --steps 20 --no-render --quiet >/dev/null 2>"$TMP/err_sv"
+rc1=$?
+"$BIN" run "$TMP/accuracy.lua" -o "$TMP/ac" --steps 20 --no-render --quiet >/dev/null 2>"$TMP/err_ac"
+rc2=$?
+if [ $rc1 = 0 ] && [ $rc2 = 0 ] && python3 - "$TMP/sv/report.json" "$TMP/ac/report.json" \
+    "$SRC/scripts/needlesim/fronts.lua" <<'PY' >"$TMP/py_sv" 2>&1; then
+import json, re, sys
+s = json.load(open(sys.argv[1]))["solver_settings"]
+assert (s["tolerance"], s["check_tolerance"], s["lazy_threshold"]) == (1e-6, 1e-6, 0), s  # check: never below
+r = json.load(open(sys.argv[2]))
+a = r["accuracy"]
+assert a["tip_m"] == 0.025 and a["front"] == "phantom" and a["measured_tip_error_m"] <= 0.025, a
+# the cheapest row of the phantom front within 25 mm (the front is listed cheapest first)
+text = open(sys.argv[3]).read()
+block = text[text.index("phantom = {"):]
+block = block[:block.index("\n    },")]
+rows = re.findall(r'label = "([^"]*)", dt = ([0-9.e+-]+),.*?tip_error = ([0-9.e+-]+)', block, re.S)
+first = next(row for row in rows if float(row[2]) <= 0.025)
+assert a["chosen"] == first[0] and r["dt_s"] == float(first[1]), (a, first)
+print("accuracy 25 mm: %s, dt %g s" % (a["chosen"], r["dt_s"]))
+PY
+    pass "solver = {...} and accuracy = ... reach the run ($(cat "$TMP/py_sv"))"
+else
+    fail "solver / accuracy fields" "exit $rc1/$rc2: $(head -1 "$TMP/err_sv") $(head -1 "$TMP/err_ac") $(tail -1 "$TMP/py_sv")"
+fi
+
+# bench --compare paper (issue 9): both solvers in this process, one object each, the speed-up,
+# and their tips within 0.05 mm at every step (the solvers solve the same equations).
+"$BIN" bench "$TUT" --steps 30 --compare paper --json >"$TMP/cmp.json" 2>"$TMP/err_c"
+rc=$?
+if [ $rc = 0 ] && python3 - "$TMP/cmp.json" "$TMP/finite.py" <<'PY' >"$TMP/py_c" 2>&1; then
+import json, sys
+r = json.load(open(sys.argv[1]))
+exec(open(sys.argv[2]).read())
+finite(r, "bench")
+for s in ["schur", "paper"]:
+    for k in ["step_ms", "stages_ms", "lcp_trials", "cg_iterations", "steps"]:
+        assert k in r[s], "missing %s.%s" % (s, k)
+    assert r[s]["steps"] == 30, r[s]["steps"]
+assert r["agree"] is True and r["max_tip_difference_m"] <= 0.05e-3, r["max_tip_difference_m"]
+assert r["speedup"] > 0
+print("tips within %.2g mm, speed-up %.2f" % (1e3 * r["max_tip_difference_m"], r["speedup"]))
+PY
+    pass "bench --compare paper --json: both solvers, tips agree ($(cat "$TMP/py_c"))"
+else
+    fail "bench --compare" "exit $rc: $(head -1 "$TMP/err_c") $(tail -1 "$TMP/py_c")"
+fi
+
 # bench of a script that ends at once: nothing to time, exit 1.
 sed -e '/act.insert/d' -e '/act.wait/d' "$TUT" >"$TMP/empty_script.lua"
 "$BIN" bench "$TMP/empty_script.lua" --steps 5 >/dev/null 2>"$TMP/err_b0"

@@ -1,0 +1,312 @@
+#!/usr/bin/env python3
+"""Speed against accuracy (issue 9, docs/performance.md).
+
+Runs the phantom (single bend) and brachytherapy scenarios over mesh resolution, time step,
+solver tolerance and lazy-Jacobian threshold with `needlesim run`, measures each run's median
+step time and its tip and marker trajectory error against a converged reference run of the same
+scenario (finest mesh, smallest dt, tightest tolerance, Jacobians rebuilt every step), and
+writes docs/speed-accuracy.csv and, with gnuplot, docs/speed-accuracy.png (the Pareto front
+marked, the default settings circled).
+
+    python3 tools/speed_accuracy.py [--bin build/needlesim] [--out docs] [--only phantom]
+
+A benchmark, not a test: it takes about half an hour on the 2-core machine. Times are medians of
+each run's own steps; the machine is shared, so compare within one sweep only.
+"""
+import argparse
+import bisect
+import csv
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# The engine's defaults (sim/coupling.c, sim/tissue.c) and the scenarios' dt.
+DEFAULT = {"tissue.refine": 1, "dt": 0.01, "solver.tolerance": 1e-8,
+           "solver.lazy_threshold": 1e-2}
+
+SCENARIOS = {
+    "phantom": {
+        "file": "scenarios/phantom_single_bend.lua",
+        "reference": {"tissue.refine": 3, "dt": 0.005, "solver.tolerance": 1e-10,
+                      "solver.lazy_threshold": 0.0},
+        # one parameter at a time from the defaults, and a few cheap combinations
+        "runs": [
+            {},
+            {"tissue.refine": 2},
+            {"dt": 0.02}, {"dt": 0.005},
+            {"solver.tolerance": 1e-4}, {"solver.tolerance": 1e-6}, {"solver.tolerance": 1e-10},
+            {"solver.lazy_threshold": 0.0}, {"solver.lazy_threshold": 0.05},
+            {"solver.lazy_threshold": 0.2},
+            {"dt": 0.02, "solver.tolerance": 1e-4, "solver.lazy_threshold": 0.05},
+            {"dt": 0.02, "solver.tolerance": 1e-6},
+            {"tissue.refine": 2, "dt": 0.005},
+            {"tissue.refine": 2, "dt": 0.02, "solver.tolerance": 1e-6},
+        ],
+    },
+    "brachytherapy": {
+        "file": "scenarios/brachytherapy.lua",
+        # Two needles and four seeds: the script's actions end on step boundaries, so runs with
+        # another dt drift apart in time and a time-matched tip says little. The tip is compared
+        # where it matters and where the runs match: at each seed's release (its position).
+        "metric": "seeds",
+        # the template holes need the scenario's own mesh: resolution is not swept here
+        "reference": {"dt": 0.005, "solver.tolerance": 1e-10, "solver.lazy_threshold": 0.0},
+        "runs": [
+            {},
+            {"dt": 0.02}, {"dt": 0.005},
+            {"solver.tolerance": 1e-4}, {"solver.tolerance": 1e-6},
+            {"solver.lazy_threshold": 0.0}, {"solver.lazy_threshold": 0.05},
+            {"dt": 0.02, "solver.tolerance": 1e-6, "solver.lazy_threshold": 0.05},
+        ],
+    },
+}
+
+
+def label(sets):
+    if not sets:
+        return "default"
+    short = {"tissue.refine": "refine", "dt": "dt", "solver.tolerance": "tol",
+             "solver.lazy_threshold": "lazy"}
+    return " ".join("%s=%g" % (short[k], v) for k, v in sorted(sets.items()))
+
+
+def run(binary, scenario, sets, tmp):
+    out = tempfile.mkdtemp(dir=tmp)
+    cmd = [binary, "run", os.path.join(ROOT, scenario), "--no-render", "--quiet", "-o", out]
+    for k, v in sorted(sets.items()):
+        cmd += ["--set", "%s=%r" % (k, v)]
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    if p.returncode != 0:
+        return None, p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "exit %d" % p.returncode
+    rep = json.load(open(os.path.join(out, "report.json")))
+    rows = list(csv.reader(open(os.path.join(out, "trajectory.csv"))))
+    head, body = rows[0], [[float(x) for x in r] for r in rows[1:]]
+    shutil.rmtree(out)
+    return {"report": rep, "head": head, "rows": body}, None
+
+
+def points(traj, prefix_cols):
+    """The time column and the 3D points of each named column triple."""
+    head = traj["head"]
+    t = [r[0] for r in traj["rows"]]
+    out = {}
+    for name, cols in prefix_cols.items():
+        idx = [head.index(c) for c in cols]
+        out[name] = [(r[idx[0]], r[idx[1]], r[idx[2]]) for r in traj["rows"]]
+    return t, out
+
+
+def triples(head):
+    """tip and every marker: name -> (x, y, z) column names."""
+    res = {"tip": ("tip_x_m", "tip_y_m", "tip_z_m")}
+    for c in head[12:]:  # after the fixed columns (docs/scenarios.md): the markers
+        if c.endswith("_x_m"):
+            base = c[:-4]
+            res[base] = (base + "_x_m", base + "_y_m", base + "_z_m")
+    return res
+
+
+def interp(ts, ps, t):
+    i = bisect.bisect_left(ts, t)
+    if i <= 0:
+        return ps[0]
+    if i >= len(ts):
+        return ps[-1]
+    a = (t - ts[i - 1]) / (ts[i] - ts[i - 1])
+    return tuple(p0 + a * (p1 - p0) for p0, p1 in zip(ps[i - 1], ps[i]))
+
+
+def errors(run_traj, ref_traj):
+    """Largest tip distance and largest marker distance from the reference over the run [m]."""
+    cols = triples(ref_traj["head"])
+    tr, pr = points(ref_traj, cols)
+    tt, pt = points(run_traj, cols)
+    tip, marker = 0.0, 0.0
+    for name in cols:
+        worst = 0.0
+        for t, p in zip(tt, pt[name]):
+            q = interp(tr, pr[name], t)
+            worst = max(worst, math.dist(p, q))
+        if name == "tip":
+            tip = worst
+        else:
+            marker = max(marker, worst)
+    return tip, marker
+
+
+def seed_errors(rep, ref):
+    """Largest distance between a run's seeds and the reference's, seed by seed [m]."""
+    a, b = rep["seeds"], ref["seeds"]
+    if len(a) != len(b):
+        return float("inf")
+    return max((math.dist(x["position_m"], y["position_m"]) for x, y in zip(a, b)),
+               default=0.0)
+
+
+def pareto(rows):
+    """Marks the rows no other row beats in both cost and tip error (errors within 1 um of
+    each other count as equal: the runs differ below what the reference resolves)."""
+    def err(r):
+        return round(r["tip_error_mm"], 3)
+    for r in rows:
+        r["pareto"] = not any(o is not r and o["cost_ms_per_s"] <= r["cost_ms_per_s"]
+                              and err(o) <= err(r)
+                              and (o["cost_ms_per_s"] < r["cost_ms_per_s"] or err(o) < err(r))
+                              for o in rows)
+
+
+def write_fronts(rows):
+    """scripts/needlesim/fronts.lua: each scenario's Pareto front, cheapest first, for
+    ns.economy and a scenario's `accuracy` field."""
+    path = os.path.join(ROOT, "scripts", "needlesim", "fronts.lua")
+    with open(path, "w") as f:
+        f.write("-- Measured speed-against-accuracy fronts: written by tools/speed_accuracy.py "
+                "(do not edit;\n-- docs/performance.md). Per scenario, the Pareto-optimal "
+                "settings, cheapest first: tip_error\n-- is the largest tip distance from the "
+                "converged reference run [m], cost the median step\n-- time per simulated "
+                "second [ms/s] on the project's 2-core machine.\nreturn {\n")
+        for sc in sorted({r["scenario"] for r in rows}):
+            front = sorted((r for r in rows if r["scenario"] == sc and r["pareto"] in
+                            (True, "True")), key=lambda r: r["cost_ms_per_s"])
+            f.write("    %s = {\n" % sc)
+            for r in front:
+                f.write("        { label = %s, dt = %r, refine = %r, tolerance = %r, "
+                        "lazy_threshold = %r,\n          tip_error = %.6g, cost = %.6g },\n" % (
+                            json.dumps(r["label"]), float(r["dt"]), float(r["refine"]),
+                            float(r["tolerance"]), float(r["lazy_threshold"]),
+                            1e-3 * float(r["tip_error_mm"]), float(r["cost_ms_per_s"])))
+            f.write("    },\n")
+        f.write("}\n")
+    print("wrote %s" % path)
+
+
+def chart(rows, out_dir):
+    if not shutil.which("gnuplot"):
+        print("gnuplot not found (apt install gnuplot-nox): no chart", file=sys.stderr)
+        return
+    work = tempfile.mkdtemp(prefix="needlesim-chart.")  # gnuplot's input, removed after
+    data = os.path.join(work, "speed-accuracy.dat")
+    with open(data, "w") as f:
+        for i, sc in enumerate(sorted({r["scenario"] for r in rows})):
+            sel = [r for r in rows if r["scenario"] == sc]
+            f.write("# %s\n" % sc)
+            for r in sel:
+                f.write("%g %g %d %d \"%s\"\n" % (r["cost_ms_per_s"], max(r["tip_error_mm"], 1e-4),
+                                                  r["pareto"], r["label"] == "default", r["label"]))
+            f.write("\n\n")
+            front = sorted((r for r in sel if r["pareto"]), key=lambda r: r["cost_ms_per_s"])
+            f.write("# %s front\n" % sc)
+            for r in front:
+                f.write("%g %g\n" % (r["cost_ms_per_s"], max(r["tip_error_mm"], 1e-4)))
+            f.write("\n\n")
+    gp = os.path.join(work, "speed-accuracy.gp")
+    names = sorted({r["scenario"] for r in rows})
+    plots = []
+    for i, sc in enumerate(names):
+        plots.append("'%s' index %d using 1:2 with points pt 7 ps 1.2 lc %d title '%s runs'"
+                     % (data, 2 * i, i + 1, sc))
+        plots.append("'%s' index %d using 1:2 with lines lw 2 lc %d title '%s Pareto front'"
+                     % (data, 2 * i + 1, i + 1, sc))
+        plots.append("'%s' index %d using ($4 > 0 ? $1 : 1/0):2 with points pt 6 ps 3 lc rgb 'black' "
+                     "title '%s'" % (data, 2 * i, "default settings" if i == 0 else ""))
+    with open(gp, "w") as f:
+        f.write("set terminal pngcairo size 1100,700 font 'DejaVu Sans,11'\n")
+        f.write("set output '%s'\n" % os.path.join(out_dir, "speed-accuracy.png"))
+        f.write("set termoption noenhanced\nset logscale xy\nset grid\nset key outside right\n")
+        f.write("set xlabel 'cost: wall time per simulated second [ms/s] (median step / dt)'\n")
+        f.write('set ylabel "tip error against the converged reference [mm]\\n'
+                '(phantom: the tip path; brachytherapy: the seeds)"\n')
+        f.write("set title 'needlesim: speed against accuracy (tools/speed_accuracy.py)'\n")
+        f.write("plot " + ", \\\n     ".join(plots) + "\n")
+    subprocess.run(["gnuplot", gp], check=True)
+    shutil.rmtree(work, ignore_errors=True)
+    print("wrote %s" % os.path.join(out_dir, "speed-accuracy.png"))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--bin", default=os.path.join(ROOT, "build", "needlesim"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs"))
+    ap.add_argument("--only", choices=sorted(SCENARIOS))
+    a = ap.parse_args()
+    tmp = tempfile.mkdtemp(prefix="needlesim-sweep.")
+    rows = []
+    try:
+        for name, spec in SCENARIOS.items():
+            if a.only and name != a.only:
+                continue
+            print("%s: reference %s ..." % (name, label(spec["reference"])), flush=True)
+            ref, err = run(a.bin, spec["file"], spec["reference"], tmp)
+            if not ref:
+                sys.exit("%s: the reference run failed: %s" % (name, err))
+            for sets in spec["runs"]:
+                full = dict(DEFAULT)
+                full.update(sets)
+                got, err = run(a.bin, spec["file"], sets, tmp)
+                row = {"scenario": name, "label": label(sets),
+                       "refine": full["tissue.refine"], "dt": full["dt"],
+                       "tolerance": full["solver.tolerance"],
+                       "lazy_threshold": full["solver.lazy_threshold"]}
+                if not got:
+                    print("  %-40s failed: %s" % (row["label"], err), flush=True)
+                    row.update({"tets": 0, "steps": 0, "median_step_ms": float("nan"),
+                                "cost_ms_per_s": float("nan"), "tip_error_mm": float("nan"),
+                                "marker_error_mm": float("nan"), "failed": err})
+                    rows.append(row)
+                    continue
+                rep = got["report"]
+                if spec.get("metric") == "seeds":
+                    tip, marker = seed_errors(rep, ref["report"]), 0.0
+                else:
+                    tip, marker = errors(got, ref)
+                row.update({"tets": rep["mesh"]["tets"], "steps": rep["steps"],
+                            "median_step_ms": rep["step_ms"]["median"],
+                            "cost_ms_per_s": rep["step_ms"]["median"] / full["dt"],
+                            "tip_error_mm": 1e3 * tip, "marker_error_mm": 1e3 * marker,
+                            "failed": ""})
+                rows.append(row)
+                print("  %-40s %6d tets  %7.2f ms/step  %8.0f ms/s  tip %.3f mm  markers %.3f mm"
+                      % (row["label"], row["tets"], row["median_step_ms"], row["cost_ms_per_s"],
+                         row["tip_error_mm"], row["marker_error_mm"]), flush=True)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    # rows of scenarios not swept this time (--only) come from the last CSV
+    path = os.path.join(a.out, "speed-accuracy.csv")
+    swept = {r["scenario"] for r in rows}
+    if os.path.exists(path):
+        for old in csv.DictReader(open(path)):
+            if old["scenario"] in swept:
+                continue
+            for k in ["refine", "dt", "tolerance", "lazy_threshold", "median_step_ms",
+                      "cost_ms_per_s", "tip_error_mm", "marker_error_mm"]:
+                old[k] = float(old[k])
+            for k in ["tets", "steps"]:
+                old[k] = int(old[k])
+            rows.append(old)
+    ok = [r for r in rows if not r["failed"]]
+    for sc in {r["scenario"] for r in ok}:
+        pareto([r for r in ok if r["scenario"] == sc])
+    for r in rows:
+        r.setdefault("pareto", False)
+    os.makedirs(a.out, exist_ok=True)
+    keys = ["scenario", "label", "refine", "tets", "dt", "tolerance", "lazy_threshold", "steps",
+            "median_step_ms", "cost_ms_per_s", "tip_error_mm", "marker_error_mm", "pareto",
+            "failed"]
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow(r)
+    print("wrote %s" % path)
+    write_fronts(ok)
+    chart(ok, a.out)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,47 @@
+-- The stability map's scene (tools/stability_map.py, docs/performance.md): a stiff symmetric
+-- needle into a gel block along its centre line, steadily or vigorously back and forth. Every
+-- knob is a parameter:
+--   dt           time step [s]                       (0.01)
+--   youngs       the gel's Young's modulus [Pa]      (20e3): the needle/tissue stiffness ratio
+--   speed        insertion speed [m/s]               (0.02)
+--   vigorous     true: 5 mm in, 3 mm back, again, to the depth (the paper's video "vigorously")
+-- The needle should stay on the line: the lateral tip deviation is the run's error.
+local ns = require "needlesim"
+local act = require "needlesim.actions"
+
+local h = 0.005
+local speed = ns.param("speed", 0.02)
+local vigorous = ns.param("vigorous", false)
+local depth = 0.03
+
+return ns.scenario {
+    name = "stability map cell",
+    dt = ns.param("dt", 0.01),
+    tissue = ns.tissue.box {
+        size = { 8 * h, 8 * h, 10 * h },
+        origin = { -4 * h, -4 * h, 0 },
+        resolution = h,
+        material = ns.material {
+            name = "gel", youngs = ns.param("youngs", 20e3), poisson = 0.45, density = 1040,
+            damping = 5, friction = 30, cut_force = 0.3,
+        },
+        fixed_faces = { "zmax" },
+    },
+    needle = ns.needle { kind = "stiff" },
+    entry = { point = { 0, 0, 0 }, direction = { 0, 0, 1 } },
+    script = function()
+        if vigorous then
+            local d = 0.0
+            while d < depth do
+                d = math.min(depth, d + 0.005)
+                act.insert { speed = speed, depth = d }
+                if d < depth then
+                    act.retract { speed = speed, depth = d - 0.003 }
+                end
+            end
+        else
+            act.insert { speed = speed, depth = depth }
+        end
+        act.wait { time = 0.1 }
+    end,
+}
