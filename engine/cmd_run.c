@@ -306,7 +306,7 @@ static int place_needle(Run *r, const char *what, char *err, int err_sz)
         cp.tau_sol = sp->tolerance;
     if (sp->check_tolerance > 0.0)
         cp.tau_check = sp->check_tolerance;
-    if (sp->tolerance > 0.0 && cp.tau_check < cp.tau_sol)
+    if (cp.tau_check < cp.tau_sol) /* never below (ns.scenario refuses an explicit one) */
         cp.tau_check = cp.tau_sol;
     for (int k = 0; k < sc->region_count; k++)
         cp.cut_force[k] = sc->regions[k].material.cut_force;
@@ -2161,7 +2161,9 @@ static double tip_difference(const Run *a, const Run *b, long *steps)
             double d = a->tips[i].v[k] - b->tips[i].v[k];
             d2 += d * d;
         }
-        worst = fmax(worst, sqrt(d2));
+        double d = sqrt(d2);
+        if (!(d <= worst)) /* a NaN counts as a disagreement */
+            worst = isnan(d) ? INFINITY : d;
     }
     *steps = n;
     return worst;
@@ -2258,9 +2260,13 @@ int ns_cmd_bench(int argc, char **argv)
     Run runs[2];
     int nruns = compare >= 0 ? 2 : 1, rc = 0, made = 0;
     for (int k = 0; k < nruns && rc == 0; k++) {
-        if (!json && !o.quiet)
-            fprintf(stderr, "running %s...\n", ns_coupled_solver_name(k ? compare : o.solver));
         rc = bench_run(&o, k ? compare : o.solver, nruns == 2, &runs[k], err, sizeof err);
+        if (rc && nruns == 2) { /* say which of the two failed */
+            char tmp[1024];
+            snprintf(tmp, sizeof tmp, "with --solver %s: %s",
+                     ns_coupled_solver_name(k ? compare : o.solver), err);
+            snprintf(err, sizeof err, "%s", tmp);
+        }
         made = k + 1;
     }
     if (rc) {

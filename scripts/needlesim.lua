@@ -888,12 +888,13 @@ local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold" }
 local ACCURACY_FIELDS = { "tip", "front" }
 
 --- ns.economy(tip, front): the cheapest settings on a measured speed-against-accuracy front
---- (scripts/needlesim/fronts.lua, written by tools/speed_accuracy.py) whose tip trajectory
---- error stays within `tip` metres: {dt, refine, tolerance, lazy_threshold, tip_error, cost,
---- label}. front: "phantom" (gel block, flexible bevel needle; the default) or
+--- (scripts/needlesim/fronts.lua, written by tools/speed_accuracy.py) whose measured error
+--- stays within `tip` metres (phantom: the tip and markers against the converged run at equal
+--- depth; brachytherapy: the seeds): a new table {dt, refine, tolerance, lazy_threshold,
+--- tip_error, cost, label}, refine the mesh refinement it was measured with (1: the
+--- scenario's own mesh). front: "phantom" (gel block, flexible bevel needle; the default) or
 --- "brachytherapy". Raises when no measured setting is accurate enough.
-function ns.economy(tip, front, where)
-    where = where or where_of(2)
+local function economy(tip, front, where, own_mesh)
     front = front or "phantom"
     if not is_finite(tip) or tip <= 0 then
         raise(where, "ns.economy", fmt("the tip accuracy must be a number > 0 [m] (got %s)",
@@ -912,17 +913,27 @@ function ns.economy(tip, front, where)
     end
     local best
     for _, r in ipairs(rows) do -- sorted by cost
-        if r.tip_error <= tip then
-            return r
-        end
-        if not best or r.tip_error < best.tip_error then
-            best = r
+        if not own_mesh or r.refine == 1 then
+            if r.tip_error <= tip then
+                local copy = {}
+                for k, v in pairs(r) do
+                    copy[k] = v
+                end
+                return copy
+            end
+            if not best or r.tip_error < best.tip_error then
+                best = r
+            end
         end
     end
-    raise(where, "ns.economy", fmt("accuracy %g m: no measured setting on the '%s' front "
+    raise(where, "ns.economy", fmt("accuracy %g m: no measured setting on the '%s' front%s "
         .. "reaches it (the most accurate, %s, is %g m off the reference; "
-        .. "docs/performance.md)", tip, front, best and best.label or "none",
-        best and best.tip_error or 0))
+        .. "docs/performance.md)", tip, front, own_mesh and " on the scenario's own mesh" or "",
+        best and best.label or "none", best and best.tip_error or 0))
+end
+
+function ns.economy(tip, front)
+    return economy(tip, front, where_of(2), false)
 end
 
 -- accuracy = 0.5e-3 or {tip = 0.5e-3, front = "phantom"}: the engine runs with the cheapest
@@ -945,7 +956,8 @@ local function accuracy_of(v, t, where)
         raise(where, "ns.scenario", "accuracy chooses dt and the solver settings from the "
             .. "measured front: give accuracy, or dt and solver, not both")
     end
-    local r = ns.economy(tip, front, where)
+    -- the scenario's mesh is its own: only settings measured on it (refine 1) can be promised
+    local r = economy(tip, front, where, true)
     return { tip = tip, front = front or "phantom", label = r.label, dt = r.dt,
         refine = r.refine, tolerance = r.tolerance, lazy_threshold = r.lazy_threshold,
         tip_error = r.tip_error, cost = r.cost }
@@ -967,9 +979,9 @@ local function solver_of(v, where)
         lazy_threshold = a:number("lazy_threshold", function(x) return x >= 0 and x < 1 end,
             "in [0, 1)", OPTIONAL),
     }
-    if s.tolerance and s.check_tolerance and s.check_tolerance < s.tolerance then
-        a:fail("check_tolerance (%g) must not be below tolerance (%g)", s.check_tolerance,
-            s.tolerance)
+    if s.check_tolerance and s.check_tolerance < (s.tolerance or 1e-8) then
+        a:fail("check_tolerance (%g) must not be below tolerance (%g%s)", s.check_tolerance,
+            s.tolerance or 1e-8, s.tolerance and "" or ", the default")
     end
     return s
 end

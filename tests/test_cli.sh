@@ -371,6 +371,9 @@ expect_error "camera: misspelt field" 1 \
 expect_error "solver: tolerance out of range" 1 \
     "tests/data/bad_solver.lua:2: ns.scenario: solver: tolerance must be a number in (0, 1)" -- \
     check tests/data/bad_solver.lua
+expect_error "solver: check_tolerance below the default tolerance" 1 \
+    "tests/data/bad_check_tolerance.lua:2: ns.scenario: solver: check_tolerance (1e-09) must not be below tolerance (1e-08, the default)" -- \
+    check tests/data/bad_check_tolerance.lua
 expect_error "accuracy and dt both given" 1 \
     "tests/data/accuracy_and_dt.lua:2: ns.scenario: accuracy chooses dt" -- \
     check tests/data/accuracy_and_dt.lua
