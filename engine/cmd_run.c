@@ -2261,11 +2261,18 @@ int ns_cmd_bench(int argc, char **argv)
     int nruns = compare >= 0 ? 2 : 1, rc = 0, made = 0;
     for (int k = 0; k < nruns && rc == 0; k++) {
         rc = bench_run(&o, k ? compare : o.solver, nruns == 2, &runs[k], err, sizeof err);
-        if (rc && nruns == 2) { /* say which of the two failed */
-            char tmp[1024];
-            snprintf(tmp, sizeof tmp, "with --solver %s: %s",
-                     ns_coupled_solver_name(k ? compare : o.solver), err);
-            snprintf(err, sizeof err, "%s", tmp);
+        if (rc && nruns == 2) { /* say which of the two failed: err gets a prefix */
+            char pre[64];
+            int np = snprintf(pre, sizeof pre,
+                              "with --solver %s: ", ns_coupled_solver_name(k ? compare : o.solver));
+            size_t ne = strlen(err);
+            if (np > 0 && (size_t)np < sizeof pre) {
+                if ((size_t)np + ne >= sizeof err)
+                    ne = sizeof err - 1 - (size_t)np;
+                memmove(err + np, err, ne);
+                memcpy(err, pre, (size_t)np);
+                err[(size_t)np + ne] = '\0';
+            }
         }
         made = k + 1;
     }
