@@ -11,10 +11,8 @@
  * are scored against their seeds or the needle tip, and DIR/report.json and
  * DIR/trajectory.csv are written (docs/scenarios.md documents both). A failed run writes
  * neither: both are written to temporary names and renamed only when the run succeeded.
- * `bench` runs the same loop for a number of steps and prints the stage timings.
- *
- * Not in this version yet (exit 2 with a message): --frames, --video, --width, --height;
- * bench --compare. */
+ * `bench` runs the same loop for a number of steps and prints the stage timings (with
+ * --compare paper, both solvers'). Pictures: engine/run_render.c. */
 #include <errno.h>
 #include <lauxlib.h>
 #include <math.h>
@@ -310,6 +308,11 @@ static int place_needle(Run *r, const char *what, char *err, int err_sz)
         cp.tau_check = cp.tau_sol;
     for (int k = 0; k < sc->region_count; k++)
         cp.cut_force[k] = sc->regions[k].material.cut_force;
+    if (sp->steer_arc) { /* needle.steering = "arc" */
+        cp.bevel_model = NS_BEVEL_ARC;
+        for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
+            cp.bevel_curvature[k] = sp->arc_curvature;
+    }
     /* One friction per unit length for the whole needle: that of the region at the entry. */
     int t0 = M->node_tets[nodes[0]].items[0];
     cp.f_perlen = sc->regions[M->tet_region[t0]].material.friction;

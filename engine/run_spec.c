@@ -234,6 +234,10 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         spec->bevel = tip && strcmp(tip, "bevel") == 0;
         free(tip);
         spec->bevel_deg = num_field(L, ni, "bevel_deg", 30.0);
+        char *steer = str_field(L, ni, "steering", "force");
+        spec->steer_arc = steer && strcmp(steer, "arc") == 0;
+        free(steer);
+        spec->arc_curvature = num_field(L, ni, "curvature", 10.0);
     } else {
         spec->needle_kind = malloc(6);
         if (spec->needle_kind)
@@ -244,6 +248,8 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         spec->density = 8000.0;
         spec->bevel = false;
         spec->bevel_deg = 30.0;
+        spec->steer_arc = false;
+        spec->arc_curvature = 10.0;
     }
     lua_pop(L, 1);
     if (raw_field(L, si, "entry") == LUA_TTABLE) {

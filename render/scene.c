@@ -346,7 +346,7 @@ enum { RING = 12 };
 static int tube(NsVertexBuf *b, const double *x, int n, double r, const uint8_t (*rgb)[3],
                 const double *apex)
 {
-    double t[3], d1[3], prev_ring[RING][3], prev_n[RING][3];
+    double t[3] = {1, 0, 0}, d1[3] = {0, 1, 0}, prev_ring[RING][3], prev_n[RING][3];
     for (int k = 0; k < n; k++) {
         double tn[3];
         const double *a = x + 3 * (k > 0 ? k - 1 : 0), *c = x + 3 * (k + 1 < n ? k + 1 : k);

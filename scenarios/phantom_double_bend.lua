@@ -3,8 +3,10 @@
 -- 180 degrees at half depth, so the bevel steers the other way and the path becomes an S.
 --
 -- What it teaches: reusing another scenario (a plain `require` of a file beside this one gives
--- its ns.scenario table) and act.twist. Our bevel model reverses the bend more slowly than the
--- paper's nonholonomic one: see docs/remeshing.md (validation case double-bend).
+-- its ns.scenario table), act.twist, and the needle's steering model. The bevel force (the
+-- single bend's) reverses the bend only a bending length (~2 cm here) after the twist; the
+-- nonholonomic arc model used here reverses it where the base turned (docs/remeshing.md,
+-- validation case double-bend). `--set needle.steering=force` runs it with the force.
 local ns = require "needlesim"
 local act = require "needlesim.actions"
 local single = require "phantom_single_bend"
@@ -14,7 +16,8 @@ return ns.scenario {
     description = "the single-bend phantom with a 180 degree twist at 5 cm (Chentanez et al. 2009, §4, Fig. 9)",
     tissue = single.tissue,
     dt = single.dt,
-    needle = single.needle,
+    needle = ns.needle { kind = "flexible", bevel_deg = single.needle.bevel_deg,
+        steering = ns.param("needle.steering", "arc") },
     entry = single.entry,
     markers = single.markers,
     camera = single.camera,

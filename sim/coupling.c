@@ -47,8 +47,10 @@ NsCouplingParams ns_default_coupling_params(void)
     p.threads = 1;
     p.refresh_iterations = 10;
     p.bevel_model = NS_BEVEL_FORCE;
-    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
-        p.bevel_force[k] = 0.5; /* N: docs/remeshing.md (bevel steering) */
+    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++) {
+        p.bevel_force[k] = 0.5;      /* N: docs/remeshing.md (bevel steering) */
+        p.bevel_curvature[k] = 10.0; /* 1/m: the force model's at 45 deg in the gel (ibid.) */
+    }
     return p;
 }
 
@@ -152,9 +154,11 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     c->rod = rod;
     c->params = params ? *params : ns_default_coupling_params();
     const NsCouplingParams *q = &c->params;
-    int bad_bevel = q->bevel_model != NS_BEVEL_FORCE && q->bevel_model != NS_BEVEL_DISPLACEMENT;
+    int bad_bevel = q->bevel_model != NS_BEVEL_FORCE && q->bevel_model != NS_BEVEL_DISPLACEMENT &&
+                    q->bevel_model != NS_BEVEL_ARC;
     for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
-        bad_bevel |= !(q->bevel_force[k] >= 0.0 && isfinite(q->bevel_force[k]));
+        bad_bevel |= !(q->bevel_force[k] >= 0.0 && isfinite(q->bevel_force[k])) ||
+                     !(q->bevel_curvature[k] >= 0.0 && isfinite(q->bevel_curvature[k]));
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
         q->refresh_iterations < 0 || bad_bevel ||
@@ -162,7 +166,8 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
                  "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper, "
-                 "bevel model force or displacement with finite bevel forces >= 0");
+                 "bevel model force, displacement or arc with finite bevel forces and "
+                 "curvatures >= 0");
         ns_needle_path_free(path); /* taken over, even on failure */
         return -1;
     }
@@ -473,6 +478,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
                 }
             ns_remesh_release_all(M, &c->remesh);
             c->outside = 1;
+            c->heading_valid = 0;
             st->exited = 1;
             char err[256];
             return ns_tissue_sync_topology(T, err, sizeof err);
@@ -493,6 +499,58 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
             u_new[i] += d * m2[i];
         if (ns_mesh_locate(M, u_new, t, 1e-9, NULL) < 0)
             return -1;
+    }
+    /* The nonholonomic model (NS_BEVEL_ARC, Webster et al. 2006): the tip cuts along an arc in
+     * material space whose heading turns towards m2 at k_c tan(psi) per distance cut (m2 taken
+     * as a material direction, the tissue around the tip as locally unrotated, as above). The
+     * tip's advance is its mapped world position's progress along the heading; its sideways
+     * offset from the arc is dropped, so no strain builds up, and the needle, coupled to the
+     * path, follows the cut. The heading persists while the needle is in (pauses and twists
+     * included) and is taken afresh from the tip's tangent after a retraction. */
+    int arc = r->params.tip == NS_TIP_BEVEL && c->params.bevel_model == NS_BEVEL_ARC;
+    double heading[3];
+    if (arc && c->state[r->nodes - 1] == NS_FRICTION_DYN_NEG)
+        c->heading_valid = 0;
+    arc = arc && c->state[r->nodes - 1] == NS_FRICTION_DYN_POS && t >= 0;
+    if (arc) {
+        double tt[3], m1[3], m2[3], w[3], adv = 0.0, wn = 0.0;
+        ns_rod_tip_frame(r, tt, m1, m2);
+        if (c->heading_valid) {
+            memcpy(heading, c->heading, sizeof heading);
+        } else {
+            double tn = norm3(tt);
+            for (int i = 0; i < 3; i++)
+                heading[i] = tn > 0.0 ? tt[i] / tn : 0.0;
+        }
+        arc = norm3(heading) > 0.5; /* no tangent (a degenerate tip edge): no arc this step */
+        const double *ut = M->u + 3 * tipn;
+        for (int i = 0; i < 3; i++)
+            adv += (u_new[i] - ut[i]) * heading[i];
+        double mh = m2[0] * heading[0] + m2[1] * heading[1] + m2[2] * heading[2];
+        for (int i = 0; i < 3; i++)
+            w[i] = m2[i] - mh * heading[i];
+        wn = norm3(w);
+        int reg = M->tet_region[t];
+        double kc =
+            reg >= 0 && reg < NS_COUPLING_MAX_REGIONS ? c->params.bevel_curvature[reg] : 0.0;
+        double kappa = wn > 1e-12 ? kc * tan(r->params.bevel_angle) : 0.0;
+        if (arc && !(adv > 0.0)) {
+            memcpy(u_new, ut, sizeof u_new); /* no progress along the arc: the tip stays */
+        } else if (arc) {
+            /* The arc of length adv: its chord (half the turn, 2 sin(a/2) / kappa long), and the
+             * heading at its end (the whole turn). */
+            double a = kappa * adv, chord = kappa > 0.0 ? 2.0 * sin(0.5 * a) / kappa : adv;
+            for (int i = 0; i < 3; i++) {
+                double wi = wn > 1e-12 ? w[i] / wn : 0.0;
+                u_new[i] = ut[i] + chord * (cos(0.5 * a) * heading[i] + sin(0.5 * a) * wi);
+                heading[i] = cos(a) * heading[i] + sin(a) * wi;
+            }
+            double hn = norm3(heading);
+            for (int i = 0; i < 3; i++)
+                heading[i] /= hn;
+            if (ns_mesh_locate(M, u_new, t, 1e-9, NULL) < 0)
+                return -1;
+        }
     }
     /* Sub-stepping (§3.4.1: Algorithm 2 presumes the tip moves less than about an element in a
      * step): a move of more than half the mean length of the tip node's edges is cut into
@@ -596,6 +654,10 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
          * towards m2 and pushes the tip there in the next steps. */
         if (bevel)
             memcpy(M->x + 3 * res.tip, r->x + 3 * (r->nodes - 1), 3 * sizeof(double));
+        if (arc) {
+            memcpy(c->heading, heading, sizeof heading);
+            c->heading_valid = 1;
+        }
         rc = ns_tissue_sync_topology(T, err, sizeof err);
     }
     free(chain);
@@ -1167,6 +1229,14 @@ uint64_t ns_coupled_state_hash(const NsCoupled *c)
     for (int i = 0; i < c->rod->nodes; i++) {
         h ^= c->state[i];
         h *= 0x100000001b3ull;
+    }
+    if (c->params.bevel_model == NS_BEVEL_ARC && c->heading_valid) { /* the cut's heading */
+        uint64_t b[3];
+        memcpy(b, c->heading, sizeof b);
+        for (int i = 0; i < 3; i++) {
+            h ^= b[i];
+            h *= 0x100000001b3ull;
+        }
     }
     return h;
 }

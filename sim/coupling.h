@@ -76,6 +76,11 @@ typedef enum NsBevelModel {
      * The strain it leaves builds up at the tip's node to about (element size) tan(psi), so
      * the steering depends on the element size. */
     NS_BEVEL_DISPLACEMENT = 1,
+    /* The nonholonomic model (Webster et al. 2006): the cut's heading in material space turns
+     * towards the tip frame's m2 at the curvature k_c tan(psi), k_c = bevel_curvature[region],
+     * per distance cut; u_new is the tip's advance along that arc, and the needle, coupled to
+     * its path, follows it. The bend reverses where the bevel turns. */
+    NS_BEVEL_ARC = 2,
 } NsBevelModel;
 
 typedef struct NsCouplingParams {
@@ -98,6 +103,8 @@ typedef struct NsCouplingParams {
     int remesh;
     NsBevelModel bevel_model;
     double bevel_force[NS_COUPLING_MAX_REGIONS]; /* k_b by tissue region [N] (NS_BEVEL_FORCE) */
+    /* k_c by tissue region: the cut's curvature at tan(psi) = 1 [1/m] (NS_BEVEL_ARC) */
+    double bevel_curvature[NS_COUPLING_MAX_REGIONS];
 } NsCouplingParams;
 
 NsCouplingParams ns_default_coupling_params(void);
@@ -150,6 +157,8 @@ typedef struct NsCoupled {
     int remesh_hint;            /* a tet near the tip, where point location starts */
     int path_cap;               /* entries allocated in path.node and path.s */
     int outside;                /* params.remesh: the needle was withdrawn out of the tissue */
+    double heading[3];          /* NS_BEVEL_ARC: the cut's unit heading in material space */
+    int heading_valid;          /* 0: taken from the needle's tip tangent when it next cuts */
     uint64_t steps;
     char error[256]; /* why the last failed ns_coupled_step failed ("" after a good step) */
 } NsCoupled;
