@@ -2065,7 +2065,23 @@ int ns_cmd_run(int argc, char **argv)
 
 static const char bench_usage[] =
     "usage: needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N]\n"
-    "                       [--set KEY=VALUE]... [--compare NAME] [--json]\n";
+    "                       [--set KEY=VALUE]... [--compare NAME] [--repeat N] [--json]\n";
+
+#define BENCH_MAX_REPEAT 100
+
+/* Median, min and max of v[0 .. n) (n >= 1; v is sorted in place). */
+static void median_range(double *v, int n, double *med, double *lo, double *hi)
+{
+    for (int i = 1; i < n; i++) /* insertion sort: n is small */
+        for (int k = i; k > 0 && v[k - 1] > v[k]; k--) {
+            double t = v[k];
+            v[k] = v[k - 1];
+            v[k - 1] = t;
+        }
+    *med = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    *lo = v[0];
+    *hi = v[n - 1];
+}
 
 static void bench_stats_json(NsJson *j, const Run *r)
 {
@@ -2177,7 +2193,9 @@ static double tip_difference(const Run *a, const Run *b, long *steps)
  * Table 2 (Total, LCP, Tissue, Needle, Remesh) and the LCP trials and CG iterations of its
  * Table 3. With --compare paper the same run again with the paper's solver, in this process:
  * both tables, the ratio of their median step times, and whether the two tips stayed within
- * 0.05 mm of each other at every step (exit 1 if not). */
+ * 0.05 mm of each other at every step (exit 1 if not). --repeat N does all of it N times (the
+ * solvers alternating) and adds the median, min and max over the repeats of each solver's
+ * median step and of the ratio; the tables are the last repeat's. */
 int ns_cmd_bench(int argc, char **argv)
 {
     RunOpts o;
@@ -2187,7 +2205,7 @@ int ns_cmd_bench(int argc, char **argv)
     o.quiet = true;
     o.no_render = true;
     bool json = false;
-    int compare = -1;
+    int compare = -1, repeat = 1;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -2198,7 +2216,7 @@ int ns_cmd_bench(int argc, char **argv)
             json = true;
         } else if (strcmp(a, "--steps") == 0 || strcmp(a, "--threads") == 0 ||
                    strcmp(a, "--solver") == 0 || strcmp(a, "--set") == 0 ||
-                   strcmp(a, "--compare") == 0) {
+                   strcmp(a, "--compare") == 0 || strcmp(a, "--repeat") == 0) {
             if (!v) {
                 fprintf(stderr, "needlesim bench: %s needs a value\n%s", a, bench_usage);
                 return 2;
@@ -2227,13 +2245,18 @@ int ns_cmd_bench(int argc, char **argv)
                 o.sets[o.nsets++] = v;
             } else {
                 long n = strtol(v, &end, 10);
-                if (*end || n < 1 || n > (strcmp(a, "--threads") == 0 ? 64 : 1000000)) {
-                    fprintf(stderr, "needlesim bench: %s: expected a positive integer\n%s", a,
-                            bench_usage);
+                long most = strcmp(a, "--threads") == 0  ? 64
+                            : strcmp(a, "--repeat") == 0 ? BENCH_MAX_REPEAT
+                                                         : 1000000;
+                if (*end || n < 1 || n > most) {
+                    fprintf(stderr, "needlesim bench: %s: expected an integer in [1, %ld]\n%s", a,
+                            most, bench_usage);
                     return 2;
                 }
                 if (strcmp(a, "--steps") == 0)
                     o.steps = n;
+                else if (strcmp(a, "--repeat") == 0)
+                    repeat = (int)n;
                 else
                     o.threads = (int)n;
             }
@@ -2261,23 +2284,46 @@ int ns_cmd_bench(int argc, char **argv)
         o.steps = 200;
     char err[1024] = "";
     Run runs[2];
-    int nruns = compare >= 0 ? 2 : 1, rc = 0, made = 0;
-    for (int k = 0; k < nruns && rc == 0; k++) {
-        rc = bench_run(&o, k ? compare : o.solver, nruns == 2, &runs[k], err, sizeof err);
-        if (rc && nruns == 2) { /* say which of the two failed: err gets a prefix */
-            char pre[64];
-            int np = snprintf(pre, sizeof pre,
-                              "with --solver %s: ", ns_coupled_solver_name(k ? compare : o.solver));
-            size_t ne = strlen(err);
-            if (np > 0 && (size_t)np < sizeof pre) {
-                if ((size_t)np + ne >= sizeof err)
-                    ne = sizeof err - 1 - (size_t)np;
-                memmove(err + np, err, ne);
-                memcpy(err, pre, (size_t)np);
-                err[(size_t)np + ne] = '\0';
-            }
+    int nruns = compare >= 0 ? 2 : 1, rc = 0, made = 0, done = 0;
+    double meds[2][BENCH_MAX_REPEAT], ratios[BENCH_MAX_REPEAT], worst = 0.0;
+    bool all_agree = true;
+    for (int rep = 0; rep < repeat && rc == 0; rep++) {
+        if (rep > 0) { /* the last repeat's runs are kept for the tables */
+            for (int k = 0; k < nruns; k++)
+                run_free(&runs[k]);
+            made = 0;
         }
-        made = k + 1;
+        if (repeat > 1 && !json)
+            fprintf(stderr, "needlesim bench: repeat %d of %d\n", rep + 1, repeat);
+        for (int k = 0; k < nruns && rc == 0; k++) {
+            rc = bench_run(&o, k ? compare : o.solver, nruns == 2, &runs[k], err, sizeof err);
+            if (rc && nruns == 2) { /* say which of the two failed: err gets a prefix */
+                char pre[64];
+                int np =
+                    snprintf(pre, sizeof pre,
+                             "with --solver %s: ", ns_coupled_solver_name(k ? compare : o.solver));
+                size_t ne = strlen(err);
+                if (np > 0 && (size_t)np < sizeof pre) {
+                    if ((size_t)np + ne >= sizeof err)
+                        ne = sizeof err - 1 - (size_t)np;
+                    memmove(err + np, err, ne);
+                    memcpy(err, pre, (size_t)np);
+                    err[(size_t)np + ne] = '\0';
+                }
+            }
+            made = k + 1;
+        }
+        if (rc == 0) {
+            long cmp_n = 0;
+            double d = nruns == 2 ? tip_difference(&runs[0], &runs[1], &cmp_n) : 0.0;
+            worst = d > worst || isnan(d) ? d : worst;
+            all_agree =
+                all_agree && (nruns == 1 || (d <= 0.05e-3 && runs[0].steps == runs[1].steps));
+            for (int k = 0; k < nruns; k++)
+                meds[k][rep] = series_quantile(&runs[k].step_ms, 0.5);
+            ratios[rep] = nruns == 2 ? meds[1][rep] / fmax(meds[0][rep], 1e-12) : 1.0;
+            done = rep + 1;
+        }
     }
     if (rc) {
         size_t n = strlen(o.scenario);
@@ -2290,7 +2336,12 @@ int ns_cmd_bench(int argc, char **argv)
     const Run *r = &runs[0];
     long compared = 0;
     double diff = nruns == 2 ? tip_difference(&runs[0], &runs[1], &compared) : 0.0;
-    bool agree = nruns == 1 || (diff <= 0.05e-3 && runs[0].steps == runs[1].steps);
+    bool agree = all_agree;
+    diff = worst;                                     /* over every repeat */
+    double rmed[3] = {0}, rlo[3] = {0}, rhi[3] = {0}; /* ours, compared, ratio */
+    for (int k = 0; k < nruns; k++)
+        median_range(meds[k], done, &rmed[k], &rlo[k], &rhi[k]);
+    median_range(ratios, done, &rmed[2], &rlo[2], &rhi[2]);
     double speedup = nruns == 2 ? series_quantile(&runs[1].step_ms, 0.5) /
                                       fmax(series_quantile(&runs[0].step_ms, 0.5), 1e-12)
                                 : 1.0;
@@ -2319,6 +2370,27 @@ int ns_cmd_bench(int argc, char **argv)
             ns_json_key(&j, "agree");
             ns_json_bool(&j, agree);
         }
+        if (repeat > 1) { /* medians of the per-repeat medians, and their range */
+            ns_json_key(&j, "repeat");
+            ns_json_begin_object(&j);
+            ns_json_key(&j, "runs");
+            ns_json_int(&j, done);
+            static const char *const what[3] = {"step_ms", "compared_step_ms", "speedup"};
+            for (int k = 0; k < 3; k++) {
+                if (k > 0 && nruns == 1)
+                    break;
+                ns_json_key(&j, what[k]);
+                ns_json_begin_object(&j);
+                ns_json_key(&j, "median");
+                ns_json_number(&j, rmed[k]);
+                ns_json_key(&j, "min");
+                ns_json_number(&j, rlo[k]);
+                ns_json_key(&j, "max");
+                ns_json_number(&j, rhi[k]);
+                ns_json_end_object(&j);
+            }
+            ns_json_end_object(&j);
+        }
         ns_json_end_object(&j);
         fputc('\n', stdout);
     } else {
@@ -2334,6 +2406,15 @@ int ns_cmd_bench(int argc, char **argv)
                    ns_coupled_solver_name((NsCoupledSolverKind)compare),
                    ns_coupled_solver_name((NsCoupledSolverKind)o.solver), speedup, 1e3 * diff,
                    compared);
+        if (repeat > 1) {
+            printf("\nover %d repeats (median step, ms: median [min, max]):\n", done);
+            for (int k = 0; k < nruns; k++)
+                printf("  %-6s %8.2f [%.2f, %.2f]\n",
+                       ns_coupled_solver_name((NsCoupledSolverKind)runs[k].opt.solver), rmed[k],
+                       rlo[k], rhi[k]);
+            if (nruns == 2)
+                printf("  speed-up %.2fx [%.2f, %.2f]\n", rmed[2], rlo[2], rhi[2]);
+        }
     }
     if (!agree)
         fprintf(stderr,

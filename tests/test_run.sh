@@ -419,6 +419,26 @@ else
     fail "bench --compare" "exit $rc: $(head -1 "$TMP/err_c") $(tail -1 "$TMP/py_c")"
 fi
 
+# bench --repeat (issue 9: medians with min/max over repeated runs): each solver's median step
+# over the repeats within its range, the ratio too; --repeat 0 is a usage error.
+"$BIN" bench "$TUT" --steps 10 --compare paper --repeat 2 --json >"$TMP/rep.json" 2>"$TMP/err_rep"
+rc=$?
+if [ $rc = 0 ] && python3 - "$TMP/rep.json" <<'PY' >"$TMP/py_rep" 2>&1; then
+import json, sys
+r = json.load(open(sys.argv[1]))["repeat"]
+assert r["runs"] == 2, r
+for k in ["step_ms", "compared_step_ms", "speedup"]:
+    assert 0 < r[k]["min"] <= r[k]["median"] <= r[k]["max"], (k, r[k])
+print("speed-up %.2f [%.2f, %.2f]" % (r["speedup"]["median"], r["speedup"]["min"], r["speedup"]["max"]))
+PY
+    pass "bench --repeat 2: medians and ranges ($(cat "$TMP/py_rep"))"
+else
+    fail "bench --repeat" "exit $rc: $(head -1 "$TMP/err_rep") $(tail -1 "$TMP/py_rep")"
+fi
+"$BIN" bench "$TUT" --repeat 0 >/dev/null 2>"$TMP/err_rep0"
+rc=$?
+if [ $rc = 2 ] && grep -q "\-\-repeat: expected an integer in \[1, 100\]" "$TMP/err_rep0"; then pass "bench --repeat 0: exit 2"; else fail "bench --repeat 0" "exit $rc: $(head -1 "$TMP/err_rep0")"; fi
+
 # bench of a script that ends at once: nothing to time, exit 1.
 sed -e '/act.insert/d' -e '/act.wait/d' "$TUT" >"$TMP/empty_script.lua"
 "$BIN" bench "$TMP/empty_script.lua" --steps 5 >/dev/null 2>"$TMP/err_b0"
