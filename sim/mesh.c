@@ -61,6 +61,7 @@ void ns_mesh_free(NsMesh *m)
     free(m->a);
     free(m->flags);
     free(m->node_tets);
+    free(m->node_changed);
     free(m->tet_node);
     free(m->tet_region);
     free(m->tet_adj);
@@ -94,8 +95,12 @@ static int reserve_nodes(NsMesh *m, int need)
     NsIntList *nt = realloc(m->node_tets, (size_t)nc * sizeof(NsIntList));
     if (nt)
         m->node_tets = nt;
-    if (!u || !x || !v || !a || !f || !nt)
+    uint64_t *nch = realloc(m->node_changed, (size_t)nc * sizeof(uint64_t));
+    if (nch)
+        m->node_changed = nch;
+    if (!u || !x || !v || !a || !f || !nt || !nch)
         return -1;
+    memset(m->node_changed + m->node_cap, 0, (size_t)(nc - m->node_cap) * sizeof(uint64_t));
     memset(m->flags + m->node_cap, 0, (size_t)(nc - m->node_cap));
     memset(m->node_tets + m->node_cap, 0, (size_t)(nc - m->node_cap) * sizeof(NsIntList));
     m->node_cap = nc;
@@ -143,7 +148,7 @@ int ns_mesh_add_node(NsMesh *m, const double u[3])
     m->flags[i] = NS_NODE_ALIVE;
     m->node_tets[i].count = 0;
     m->node_alive++;
-    m->topology_version++;
+    m->node_changed[i] = ++m->topology_version;
     return i;
 }
 
@@ -156,7 +161,7 @@ int ns_mesh_remove_node(NsMesh *m, int node)
     m->flags[node] = 0;
     m->free_nodes[m->free_node_count++] = node;
     m->node_alive--;
-    m->topology_version++;
+    m->node_changed[node] = ++m->topology_version;
     return 0;
 }
 
@@ -225,6 +230,8 @@ int ns_mesh_add_tet(NsMesh *m, const int nodes[4], int region)
         list_push(&m->node_tets[nodes[k]], t); /* cannot fail: reserved above */
     m->tet_alive++;
     m->topology_version++;
+    for (int k = 0; k < 4; k++)
+        m->node_changed[nodes[k]] = m->topology_version;
     return t;
 }
 
@@ -244,10 +251,12 @@ void ns_mesh_remove_tet(NsMesh *m, int t)
         list_remove(&m->node_tets[m->tet_node[4 * t + k]], t);
         m->tet_adj[4 * t + k] = -1;
     }
-    m->tet_node[4 * t] = -1;
-    m->free_tets[m->free_tet_count++] = t;
     m->tet_alive--;
     m->topology_version++;
+    for (int k = 0; k < 4; k++)
+        m->node_changed[m->tet_node[4 * t + k]] = m->topology_version;
+    m->tet_node[4 * t] = -1;
+    m->free_tets[m->free_tet_count++] = t;
 }
 
 int ns_mesh_copy(NsMesh *dst, const NsMesh *src)
@@ -262,6 +271,7 @@ int ns_mesh_copy(NsMesh *dst, const NsMesh *src)
     memcpy(dst->v, src->v, n3);
     memcpy(dst->a, src->a, n3);
     memcpy(dst->flags, src->flags, (size_t)src->node_slots);
+    memcpy(dst->node_changed, src->node_changed, (size_t)src->node_slots * sizeof(uint64_t));
     for (int i = 0; i < src->node_slots; i++) {
         const NsIntList *s = &src->node_tets[i];
         NsIntList *d = &dst->node_tets[i];
@@ -639,6 +649,8 @@ int ns_mesh_compact(NsMesh *m)
     m->free_node_count = 0;
     m->free_tet_count = 0;
     m->topology_version++;
+    for (int i = 0; i < n; i++) /* renumbered: every node's list counts as changed */
+        m->node_changed[i] = m->topology_version;
     free(remap);
     free(tremap);
     return 0;

@@ -28,12 +28,13 @@ typedef struct NsMesh {
     int node_slots;
     int node_cap;
     int node_alive;
-    double *u;            /* (node_cap x 3) material (rest) coordinates [m] */
-    double *x;            /* (node_cap x 3) world coordinates [m] */
-    double *v;            /* (node_cap x 3) velocity [m/s] */
-    double *a;            /* (node_cap x 3) acceleration [m/s^2] */
-    uint8_t *flags;       /* (node_cap) NS_NODE_* bits */
-    NsIntList *node_tets; /* (node_cap) incident alive tets, unordered */
+    double *u;              /* (node_cap x 3) material (rest) coordinates [m] */
+    double *x;              /* (node_cap x 3) world coordinates [m] */
+    double *v;              /* (node_cap x 3) velocity [m/s] */
+    double *a;              /* (node_cap x 3) acceleration [m/s^2] */
+    uint8_t *flags;         /* (node_cap) NS_NODE_* bits */
+    NsIntList *node_tets;   /* (node_cap) incident alive tets, unordered */
+    uint64_t *node_changed; /* (node_cap) topology_version when node_tets[i] last changed */
 
     /* tets: slots [0, tet_slots), of which tet_alive are in use */
     int tet_slots;

@@ -240,8 +240,7 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             f[0] = f[1] = f[2] = 1;
         t->was_alive[i] = (uint8_t)alive;
     }
-    t->kd_valid = 0; /* every row of K and D gathered again at the next force evaluation */
-    return 0;
+    return 0; /* the rows of nodes whose tets changed are gathered again (mesh.node_changed) */
 }
 
 void ns_tissue_fix_dof(NsTissue *t, int node, int axis, int fixed)
@@ -538,7 +537,8 @@ static void add_block(double *restrict kb, double *restrict db, const double *re
         }
 }
 
-/* Phase 2, block row i of K and D, gathered again if an incident tet was rebuilt (or all_rows):
+/* Phase 2, block row i of K and D, gathered again if an incident tet was rebuilt, its list of
+ * tets changed since the last gather (remeshing: mesh.node_changed), or all_rows:
  * zeroed, then every incident tet's blocks (i, j) added in node->tet list order. colpos (node
  * slots, all -1, may be NULL) maps a column to its position in the row while the row is
  * gathered, which saves a search per block when K and D already store every block the tets
@@ -548,7 +548,7 @@ static int node_rows(NsTissue *t, int i, int all_rows, int *colpos)
 {
     const NsMesh *M = &t->mesh;
     const NsIntList *l = (M->flags[i] & NS_NODE_ALIVE) ? &M->node_tets[i] : NULL;
-    int n = l ? l->count : 0, dirty = all_rows;
+    int n = l ? l->count : 0, dirty = all_rows || M->node_changed[i] > t->kd_version;
     for (int q = 0; q < n && !dirty; q++)
         dirty = t->jnew[l->items[q]];
     if (!dirty)
@@ -604,9 +604,10 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
     int threads = t->params.threads > 1 ? t->params.threads : 1;
     if (force_all)
         memset(t->jvalid, 0, (size_t)M->tet_slots);
-    /* Rows of deleted tets' nodes must lose their blocks: after a topology change every row is
-     * gathered again (the element matrices of surviving tets are kept). */
-    int all_rows = force_all || !t->kd_valid || t->kd_version != M->topology_version;
+    /* After a topology change only the rows of nodes whose tets changed are gathered again
+     * (node_rows: their removed tets' blocks go to zero); a row gathered again sums the same
+     * blocks in the same order as a full gather, so the result does not depend on it. */
+    int all_rows = force_all || !t->kd_valid;
     int nn = M->node_slots < t->K.n ? M->node_slots : t->K.n;
     int parts = partition(t, threads) == 0 ? t->part_count : 0;
     size_t ncol = (size_t)(t->K.n > M->node_slots ? t->K.n : M->node_slots);

@@ -1,8 +1,10 @@
 /* Tests for sim/tissue.c on small meshes from the mesher: free vibration conserves energy under
- * the trapezoidal rule. The patch test and the other cases with analytic answers are in
- * `needlesim validate` (engine/validate_fem.c, docs/validation.md, run by tests/test_validate.sh);
- * determinism across thread counts is in test_threads.c. */
+ * the trapezoidal rule; after remeshing, the rows of K and D gathered again only where nodes'
+ * tets changed equal a full gather, bit for bit. The patch test and the other cases with analytic
+ * answers are in `needlesim validate` (engine/validate_fem.c, docs/validation.md, run by
+ * tests/test_validate.sh); determinism across thread counts is in test_threads.c. */
 #include "mesher.h"
+#include "remesh.h"
 #include "tissue.h"
 #include "ns_test.h"
 
@@ -55,4 +57,84 @@ static int vibration_conserves_energy(void)
     return 0;
 }
 
-NS_TEST_MAIN({"vibration_conserves_energy", vibration_conserves_energy})
+/* Every block of K and D, in row order: (row, column, 9 values) each. */
+static double *snapshot(const NsTissue *t, int *count)
+{
+    int n = 0;
+    for (int i = 0; i < t->K.n; i++)
+        n += t->K.rows[i].count + t->D.rows[i].count;
+    double *v = malloc((size_t)(n > 0 ? n : 1) * 11 * sizeof(double)), *p = v;
+    for (int w = 0; v && w < 2; w++) {
+        const NsBlockMatrix *B = w ? &t->D : &t->K;
+        for (int i = 0; i < B->n; i++)
+            for (int q = 0; q < B->rows[i].count; q++) {
+                *p++ = i;
+                *p++ = B->rows[i].col[q];
+                memcpy(p, B->rows[i].val + 9 * q, 9 * sizeof(double));
+                p += 9;
+            }
+    }
+    *count = n;
+    return v;
+}
+
+/* K and D of t equal those of a full gather of the same element matrices (bitwise). */
+static int rows_match_full_gather(NsTissue *t)
+{
+    int na, nb;
+    double *a = snapshot(t, &na);
+    t->kd_valid = 0; /* every row gathered again, from the same element matrices */
+    ns_tissue_forces(t, 0, NULL);
+    double *b = snapshot(t, &nb);
+    int same = a && b && na == nb && memcmp(a, b, (size_t)na * 11 * sizeof(double)) == 0;
+    free(a);
+    free(b);
+    ENSURE(same);
+    return 0;
+}
+
+static int remesh_rows_gathered(void)
+{
+    NsMesh m;
+    ENSURE(make_mesh(&m, 0.008) == 0);
+    NsTissueMaterial mat = {ns_fem_material(NS_MODEL_COROTATIONAL, 20e3, 0.3, 3, 3), 1000.0};
+    NsTissueParams p = ns_default_tissue_params();
+    p.lazy_threshold = 1e9; /* no Jacobian rebuilt but the changed tets' */
+    NsTissue t;
+    char err[256];
+    ENSURE(ns_tissue_init(&t, &m, &mat, 1, &p, err, sizeof err) == 0);
+    for (int i = 0; i < t.mesh.node_slots; i++)
+        t.mesh.x[3 * i] *= 1.01; /* stretched, so that the blocks are not the rest ones */
+    ns_tissue_forces(&t, 0, NULL);
+    /* An interior edge split at its midpoint, then undone: the new node's row loses every tet
+     * without any tet of its own being rebuilt. */
+    NsMesh *M = &t.mesh;
+    int e = -1;
+    for (int k = 0; k < M->tet_slots && e < 0; k++)
+        if (ns_mesh_tet_alive(M, k) && M->tet_adj[4 * k] >= 0 && M->tet_adj[4 * k + 1] >= 0 &&
+            M->tet_adj[4 * k + 2] >= 0 && M->tet_adj[4 * k + 3] >= 0)
+            e = k;
+    ENSURE(e >= 0);
+    int edge[2] = {M->tet_node[4 * e], M->tet_node[4 * e + 1]};
+    double u[3];
+    for (int c = 0; c < 3; c++)
+        u[c] = 0.5 * (M->u[3 * edge[0] + c] + M->u[3 * edge[1] + c]);
+    NsRemeshStack s;
+    ns_remesh_stack_init(&s);
+    int node = ns_remesh_split(M, &s, edge, 2, u);
+    ENSURE(node >= 0);
+    ENSURE(ns_tissue_sync_topology(&t, err, sizeof err) == 0);
+    ns_tissue_forces(&t, 0, NULL);
+    ENSURE(rows_match_full_gather(&t) == 0);
+    ENSURE(ns_remesh_undo(M, &s) == 0);
+    ENSURE(ns_tissue_sync_topology(&t, err, sizeof err) == 0);
+    ns_tissue_forces(&t, 0, NULL);
+    ENSURE(rows_match_full_gather(&t) == 0);
+    ns_remesh_stack_free(&s);
+    ns_tissue_free(&t);
+    ns_mesh_free(&m);
+    return 0;
+}
+
+NS_TEST_MAIN({"vibration_conserves_energy", vibration_conserves_energy},
+             {"remesh_rows_gathered", remesh_rows_gathered})
