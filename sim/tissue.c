@@ -167,6 +167,9 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
 {
     const NsMesh *M = &t->mesh;
     int nt = M->tet_slots, nn = M->node_slots;
+    /* A sync that fails part-way leaves every row of K and D to be gathered again. */
+    int kd_valid = t->kd_valid;
+    t->kd_valid = 0;
     if (nt > t->tet_cap) {
         int cap = nt > 2 * t->tet_cap ? nt : 2 * t->tet_cap, old = t->tet_cap;
         if (grow_zero((void **)&t->rest, old, cap, sizeof *t->rest) ||
@@ -240,7 +243,8 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             f[0] = f[1] = f[2] = 1;
         t->was_alive[i] = (uint8_t)alive;
     }
-    return 0; /* the rows of nodes whose tets changed are gathered again (mesh.node_changed) */
+    t->kd_valid = kd_valid; /* only the rows of nodes whose tets changed are gathered again */
+    return 0;
 }
 
 void ns_tissue_fix_dof(NsTissue *t, int node, int axis, int fixed)
@@ -664,8 +668,9 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
             tj = mine > tj ? mine : tj;
         }
     }
-    /* A row that lost a block to memory is wrong: gather every row again next time. */
-    t->kd_valid = !failed;
+    /* A row that lost a block to memory is wrong, and nodes beyond K's rows (no sync since the
+     * mesh grew) were not gathered: gather every row again next time. */
+    t->kd_valid = !failed && nn == M->node_slots;
     t->kd_version = M->topology_version;
     if (stats) {
         double total = now_ms() - t0;
