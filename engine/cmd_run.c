@@ -2334,10 +2334,11 @@ int ns_cmd_bench(int argc, char **argv)
         return 1;
     }
     const Run *r = &runs[0];
-    long compared = 0;
-    double diff = nruns == 2 ? tip_difference(&runs[0], &runs[1], &compared) : 0.0;
+    long compared = 0; /* the steps compared in the last repeat */
+    if (nruns == 2)
+        tip_difference(&runs[0], &runs[1], &compared);
     bool agree = all_agree;
-    diff = worst;                                     /* over every repeat */
+    double diff = worst;                              /* over every repeat */
     double rmed[3] = {0}, rlo[3] = {0}, rhi[3] = {0}; /* ours, compared, ratio */
     for (int k = 0; k < nruns; k++)
         median_range(meds[k], done, &rmed[k], &rlo[k], &rhi[k]);

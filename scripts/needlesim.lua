@@ -869,6 +869,9 @@ function ns.needle(t)
         a:fail("inner_diameter (%g m) must be smaller than diameter (%g m)", n.inner_diameter,
             n.diameter)
     end
+    if a:get("curvature") ~= nil and (n.steering ~= "arc" or n.tip ~= "bevel") then
+        a:fail("curvature is the arc model's: it needs tip = \"bevel\" and steering = \"arc\"")
+    end
     return new(NEEDLE, n)
 end
 

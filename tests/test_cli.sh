@@ -371,6 +371,9 @@ expect_error "camera: misspelt field" 1 \
 expect_error "needle: unknown steering model" 1 \
     "tests/data/bad_steering.lua:6: ns.needle: steering must be one of 'force', 'arc'" \
     "(got 'sideways')" -- check tests/data/bad_steering.lua
+expect_error "needle: curvature without the arc model" 1 \
+    "tests/data/bad_curvature.lua:6: ns.needle: curvature is the arc model's" -- \
+    check tests/data/bad_curvature.lua
 expect_error "solver: tolerance out of range" 1 \
     "tests/data/bad_solver.lua:2: ns.scenario: solver: tolerance must be a number in (0, 1)" -- \
     check tests/data/bad_solver.lua
