@@ -46,6 +46,7 @@ NsCouplingParams ns_default_coupling_params(void)
     p.solver = NS_COUPLED_SCHUR;
     p.threads = 1;
     p.refresh_iterations = 10;
+    p.remesh_dihedral_floor = 12.0;
     p.bevel_model = NS_BEVEL_FORCE;
     for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++) {
         p.bevel_force[k] = 0.5;      /* N: docs/remeshing.md (bevel steering) */
@@ -162,10 +163,12 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
         q->refresh_iterations < 0 || bad_bevel ||
+        !(q->remesh_dihedral_floor >= 0.0 && q->remesh_dihedral_floor <= 60.0) ||
         (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
                  "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper, "
+                 "remesh_dihedral_floor in [0, 60] deg, "
                  "bevel model force, displacement or arc with finite bevel forces and "
                  "curvatures >= 0");
         ns_needle_path_free(path); /* taken over, even on failure */
@@ -435,6 +438,42 @@ static void tip_dihedrals(const NsCoupled *c, NsCouplingStats *st)
     }
 }
 
+/* A fresh heading for the arc model: the cut's direction at the tip in material space, the
+ * chord from the tip's node back along the path to the first node at least the mean length of
+ * the tip node's edges away (or the path's start). The world tangent of the rod's last edge is
+ * no substitute: right after skin entry that edge is a tenth of an element long, and the strain
+ * of the tissue around it tilts it by ten degrees or more. Returns 1, or 0 with no chord. */
+static int path_heading(const NsMesh *M, const NsNeedlePath *p, double heading[3])
+{
+    int tipn = p->node[p->count - 1];
+    const double *ut = M->u + 3 * tipn;
+    const NsIntList *l = &M->node_tets[tipn];
+    double h = 0.0;
+    int ne = 0;
+    for (int i = 0; i < l->count; i++)
+        for (int k = 0; k < 4; k++) {
+            int o = M->tet_node[4 * l->items[i] + k];
+            if (o != tipn) {
+                double e[3] = {M->u[3 * o] - ut[0], M->u[3 * o + 1] - ut[1],
+                               M->u[3 * o + 2] - ut[2]};
+                h += norm3(e);
+                ne++;
+            }
+        }
+    h = ne ? h / ne : 0.0;
+    double d[3] = {0, 0, 0}, dn = 0.0;
+    for (int j = p->count - 2; j >= 0 && !(dn >= h); j--) {
+        for (int i = 0; i < 3; i++)
+            d[i] = ut[i] - M->u[3 * p->node[j] + i];
+        dn = norm3(d);
+    }
+    if (!(dn > 0.0))
+        return 0;
+    for (int i = 0; i < 3; i++)
+        heading[i] = d[i] / dn;
+    return 1;
+}
+
 /* Algorithm 2 at the tip (§3.4.1): the needle tip's world position, located in the deformed
  * tissue, gives its material position u_new; the tissue is remeshed so a node sits there and
  * the needle's chain of tissue nodes (the path) follows; the tissue then syncs its arrays. */
@@ -517,7 +556,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         ns_rod_tip_frame(r, tt, m1, m2);
         if (c->heading_valid) {
             memcpy(heading, c->heading, sizeof heading);
-        } else {
+        } else if (!path_heading(M, p, heading)) {
             double tn = norm3(tt);
             for (int i = 0; i < 3; i++)
                 heading[i] = tn > 0.0 ? tt[i] / tn : 0.0;
@@ -608,8 +647,9 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         double us[3];
         for (int i = 0; i < 3; i++)
             us[i] = sub == K ? u_new[i] : u0[i] + du[i] * sub / K;
-        NsRemeshTip tip = {chain[0], chain[1], len > 2 ? chain[2] : -1, chain, len, penetrating,
-                           false,    hint};
+        NsRemeshTip tip = {chain[0], chain[1], len > 2 ? chain[2] : -1,
+                           chain,    len,      penetrating,
+                           false,    hint,     c->params.remesh_dihedral_floor};
         rc = ns_remesh_tip(M, &c->remesh, &tip, us, &res, err, sizeof err);
         if (rc != 0) {
             snprintf(c->error, sizeof c->error, "%s", err);
@@ -695,6 +735,17 @@ static int reparameterize(NsCoupled *c, NsCouplingStats *st)
                      "modelled yet)");
             return -1;
         }
+        /* Free of the tissue, the rod still splits and merges its edges: a retraction shortens
+         * the edge at the sleeve, which must merge with the next to go on. */
+        if (c->outside) {
+            NsRodStats rs;
+            memset(&rs, 0, sizeof rs);
+            if (ns_rod_reparameterize(r, &rs) || reserve(c, r->cap))
+                return -1;
+            st->rod_splits += rs.splits;
+            st->rod_merges += rs.merges;
+            couple_from_path(c, 0, 0);
+        }
         return 0;
     }
     /* The tip's cut (or retreat): its slide along its tangent, mapped into material length on
@@ -753,8 +804,10 @@ static int reparameterize(NsCoupled *c, NsCouplingStats *st)
     double minlen = 0.25 * r->min_rest_edge;
     int m = 0;
     for (int i = 0; i < first; i++) {
-        /* Free nodes before the entry stay unless the needle slid them into the tissue. */
-        if (i >= r->held && nb > 1) {
+        /* Free nodes before the entry stay unless the needle slid them into the tissue (past
+         * the entry node along the path's first edge; right after skin entry that edge runs
+         * to the tip's node). */
+        if (i >= r->held && p->count > 1) {
             double t[3], d[3];
             for (int k = 0; k < 3; k++) {
                 t[k] = M->x[3 * p->node[1] + k] - M->x[3 * p->node[0] + k];

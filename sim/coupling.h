@@ -101,6 +101,10 @@ typedef struct NsCouplingParams {
      * at the tip every step it slides (Algorithm 2, sim/remesh.h), the path then being the
      * needle's chain of tissue nodes with the tip at its last node */
     int remesh;
+    /* remesh: candidates whose region's worst dihedral angle is below this [deg] rank below
+     * those above it, before the paper's quality vector is compared (sim/remesh.h; 0: the
+     * paper's choice; 12 by default, docs/remeshing.md) */
+    double remesh_dihedral_floor;
     NsBevelModel bevel_model;
     double bevel_force[NS_COUPLING_MAX_REGIONS]; /* k_b by tissue region [N] (NS_BEVEL_FORCE) */
     /* k_c by tissue region: the cut's curvature at tan(psi) = 1 [1/m] (NS_BEVEL_ARC) */

@@ -578,6 +578,20 @@ static int region_quality(const NsMesh *m, const int *nodes, int nn, double *q, 
 
 #define REGION_CAP 1024
 
+/* The worst dihedral angle of tets ids[0 .. n) in material space [deg]. */
+static double region_min_dihedral(const NsMesh *m, const int *ids, int n)
+{
+    double lo = 180.0;
+    for (int k = 0; k < n; k++) {
+        const int *tn = m->tet_node + 4 * ids[k];
+        double d[6];
+        ns_tet_dihedrals(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2], m->u + 3 * tn[3], d);
+        for (int j = 0; j < 6; j++)
+            lo = fmin(lo, d[j]);
+    }
+    return lo;
+}
+
 typedef struct Applied {
     int ok;
     int placed; /* the node at u_new */
@@ -831,6 +845,7 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
     }
     double *qcur = qbest + 2 * REGION_CAP;
     int best = -1, nbest = 0;
+    double dbest = 0.0, floor_deg = tip->dihedral_floor_deg;
     for (int i = 0; i < nc; i++) {
         const Candidate *c = &cand[i];
         if (breaks_chain(tip, c))
@@ -859,10 +874,19 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             nq = region_quality(m, rn2, nrn + 1, qcur, REGION_CAP);
             ok = nq > 0 && qcur[0] > 0.0;
         }
+        /* Our addition: the region's worst dihedral angle, clipped at the floor, ranks first. A
+         * tet's quality can stay fair with a flat dihedral angle (a sliver-like cap); ranking
+         * by quality alone let 8.8 deg angles through in remesh-cycles with skin entry. */
+        double dcur =
+            ok && floor_deg > 0.0
+                ? fmin(region_min_dihedral(m, (const int *)(qcur + REGION_CAP), nq), floor_deg)
+                : 0.0;
         if (ok) {
             res->candidates++;
-            if (best < 0 || ns_quality_vector_cmp(qcur, nq, qbest, nbest) > 0) {
+            if (best < 0 || dcur > dbest ||
+                (dcur == dbest && ns_quality_vector_cmp(qcur, nq, qbest, nbest) > 0)) {
                 best = i;
+                dbest = dcur;
                 nbest = nq;
                 memcpy(qbest, qcur, (size_t)nq * sizeof *qbest);
             }

@@ -90,6 +90,17 @@ int ns_remesh_record_original(NsRemeshStack *s, int n, const double u[3]);
  * there, as for a snap) and forgets the records: the needle has left the tissue. */
 void ns_remesh_release_all(NsMesh *m, NsRemeshStack *s);
 
+/* Skin entry (§3.4.1, sim/remesh_entry.c): the needle's first penetration at material point a on
+ * the tissue's surface, along direction d. The entry node is made at a (a surface node within a
+ * quarter of its shortest edge snapped there, else the surface face or edge split at a), then
+ * the tip node at depth along d (the simplex containing it split there), joined to the entry
+ * node by an edge: the short edge at the skin. The splits are pushed on s and the snap recorded,
+ * so that undoing s and releasing its records restores the mesh. nodes[0]: the entry node,
+ * nodes[1]: the tip node. Returns 0, or -1 with a message (a not on the surface, d not into the
+ * tissue there, or no valid split). */
+int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const double d[3],
+                         double depth, int nodes[2], char *err, int err_sz);
+
 /* Needle tip state for Algorithm 2. */
 typedef struct NsRemeshTip {
     int u1, u2, u3;   /* tissue nodes of the needle: the tip, the one behind it, the one
@@ -99,6 +110,10 @@ typedef struct NsRemeshTip {
     int penetrating;     /* 1: DYNAMIC+ (cutting forward); 0: DYNAMIC- (retracting) */
     bool allow_boundary; /* skin entry: operations may change the boundary */
     int hint_tet;        /* where the point location starts (updated on return) */
+    /* Our addition to the choice (§3.4.1): candidates are ranked first by their region's worst
+     * dihedral angle clipped at this floor [deg], then by the sorted quality vector; 0: by the
+     * quality vector alone, as in the paper */
+    double dihedral_floor_deg;
 } NsRemeshTip;
 
 typedef struct NsRemeshResult {

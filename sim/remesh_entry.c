@@ -1,0 +1,202 @@
+/* Skin entry (paper §3.4.1): the needle's first penetration, the one remeshing step allowed to
+ * change the tissue's boundary. The entry node is made on the surface at the entry point (a
+ * nearby surface node snapped there, or the surface face or edge split there), and the tip node
+ * just inside it, a short edge away (the split of the simplex containing it). From then on
+ * Algorithm 2 (remesh.c) moves the tip; the paper's "very short edge connecting the needle tip to
+ * the mesh surface, with flat tetrahedra adjoining it" is the edge made here, and it lengthens as
+ * the tip node is snapped deeper in the next steps. Both splits go on the needle's undo stack,
+ * and the snap is recorded, so that the needle's exit gives back the original mesh. */
+#include "remesh.h"
+
+#include "err.h"
+#include "quality.h"
+
+#include <math.h>
+#include <string.h>
+
+/* A surface node is snapped to the entry point if that moves it by at most this fraction of its
+ * shortest edge (else the surface simplex there is split: no sliver next to a node). */
+#define ENTRY_SNAP 0.75
+/* Barycentric coordinates below this make a point lie on the opposite face. */
+#define ENTRY_ON 1e-6
+/* A snap may not bring an incident tet's quality below this (unless it was lower already). */
+#define ENTRY_MIN_QUALITY 0.05
+
+static int on_boundary(const NsMesh *m, int n)
+{
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++)
+        for (int k = 0; k < 4; k++)
+            if (m->tet_adj[4 * l->items[i] + k] < 0 && m->tet_node[4 * l->items[i] + k] != n)
+                return 1;
+    return 0;
+}
+
+static int joined(const NsMesh *m, int a, int b)
+{
+    const NsIntList *l = &m->node_tets[a];
+    for (int i = 0; i < l->count; i++)
+        for (int k = 0; k < 4; k++)
+            if (m->tet_node[4 * l->items[i] + k] == b)
+                return 1;
+    return 0;
+}
+
+static double dist(const double *p, const double *q)
+{
+    return sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
+                (p[2] - q[2]) * (p[2] - q[2]));
+}
+
+static double shortest_edge(const NsMesh *m, int n)
+{
+    double e = INFINITY;
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++)
+        for (int k = 0; k < 4; k++) {
+            int o = m->tet_node[4 * l->items[i] + k];
+            if (o != n)
+                e = fmin(e, dist(m->u + 3 * n, m->u + 3 * o));
+        }
+    return e;
+}
+
+/* Does node n's star stay positive in material and world space, and of fair quality, at its
+ * current position? (quality is compared with q_before, the star's worst before the move) */
+static int star_ok(const NsMesh *m, int n, double q_before)
+{
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++) {
+        const int *tn = m->tet_node + 4 * l->items[i];
+        const double *u[4], *x[4];
+        for (int k = 0; k < 4; k++) {
+            u[k] = m->u + 3 * tn[k];
+            x[k] = m->x + 3 * tn[k];
+        }
+        double q = ns_tet_quality(u[0], u[1], u[2], u[3]);
+        if (!(ns_tet_volume(u[0], u[1], u[2], u[3]) > 0.0) ||
+            !(ns_tet_volume(x[0], x[1], x[2], x[3]) > 0.0) ||
+            (q < ENTRY_MIN_QUALITY && q < q_before))
+            return 0;
+    }
+    return 1;
+}
+
+static double star_quality(const NsMesh *m, int n)
+{
+    double q = INFINITY;
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++) {
+        const int *tn = m->tet_node + 4 * l->items[i];
+        q = fmin(q, ns_tet_quality(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2],
+                                   m->u + 3 * tn[3]));
+    }
+    return q;
+}
+
+/* A node at material point p in tet t (barycentric b): the simplex of the nodes with weight
+ * above ENTRY_ON is split at p (an edge, a face or the tet), or, if p is at a node, that node.
+ * Returns the node, or -1. */
+static int node_at(NsMesh *m, NsRemeshStack *s, int t, const double b[4], const double p[3])
+{
+    int simplex[4], k = 0;
+    for (int j = 0; j < 4; j++)
+        if (b[j] > ENTRY_ON)
+            simplex[k++] = m->tet_node[4 * t + j];
+    if (k == 1)
+        return simplex[0];
+    return k >= 2 ? ns_remesh_split(m, s, simplex, k, p) : -1;
+}
+
+int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const double d[3],
+                         double depth, int nodes[2], char *err, int err_sz)
+{
+    double dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    if (!(dn > 0.0) || !isfinite(dn) || !(depth > 0.0) || !isfinite(depth) ||
+        !isfinite(a[0] + a[1] + a[2])) {
+        ns_set_err(err, err_sz, "skin entry: a finite point, a direction and a depth > 0 needed");
+        return -1;
+    }
+    double u[3] = {d[0] / dn, d[1] / dn, d[2] / dn}, b[4], behind[3], ahead[3];
+    int t = ns_mesh_locate(m, a, -1, ENTRY_ON, b);
+    if (t < 0) {
+        ns_set_err(err, err_sz, "the entry point is not on the tissue (outside its mesh)");
+        return -1;
+    }
+    /* On the surface, facing it: just behind the point is outside, just ahead inside. */
+    double probe = 0.01 * depth;
+    for (int i = 0; i < 3; i++) {
+        behind[i] = a[i] - probe * u[i];
+        ahead[i] = a[i] + probe * u[i];
+    }
+    if (ns_mesh_locate(m, behind, t, 0.0, NULL) >= 0) {
+        ns_set_err(err, err_sz,
+                   "the entry point is not on the tissue's surface (the tissue goes on behind "
+                   "it, against the direction)");
+        return -1;
+    }
+    if (ns_mesh_locate(m, ahead, t, 0.0, NULL) < 0) {
+        ns_set_err(err, err_sz, "the direction does not point into the tissue at the entry point");
+        return -1;
+    }
+    int base = s->count;
+    /* 1. The entry node: the nearest surface node of the tet snapped onto the point if it is
+     *    close, else a new node where the point lies (a surface face or edge split). */
+    int entry = -1, near = -1;
+    double nd = INFINITY;
+    for (int j = 0; j < 4; j++) {
+        int n = m->tet_node[4 * t + j];
+        double e = dist(m->u + 3 * n, a);
+        if (e < nd && on_boundary(m, n) && !(m->flags[n] & NS_NODE_FIXED)) {
+            nd = e;
+            near = n;
+        }
+    }
+    if (near >= 0 && nd <= ENTRY_SNAP * shortest_edge(m, near)) {
+        double su[3], sx[3], sv[3], sa[3], q0 = star_quality(m, near);
+        memcpy(su, m->u + 3 * near, sizeof su);
+        memcpy(sx, m->x + 3 * near, sizeof sx);
+        memcpy(sv, m->v + 3 * near, sizeof sv);
+        memcpy(sa, m->a + 3 * near, sizeof sa);
+        if (nd == 0.0 || (ns_remesh_snap(m, s, near, a) == 0 && star_ok(m, near, q0))) {
+            entry = near;
+        } else { /* put it back (a recorded original stays recorded: it is where it is) */
+            memcpy(m->u + 3 * near, su, sizeof su);
+            memcpy(m->x + 3 * near, sx, sizeof sx);
+            memcpy(m->v + 3 * near, sv, sizeof sv);
+            memcpy(m->a + 3 * near, sa, sizeof sa);
+        }
+    }
+    if (entry < 0)
+        entry = node_at(m, s, t, b, a);
+    if (entry < 0) {
+        ns_set_err(err, err_sz, "the surface could not be split at the entry point");
+        return -1;
+    }
+    /* 2. The tip node, depth along the direction: the simplex containing it split there. If
+     *    that point lies beyond the entry node's tets (its new node would not be joined to the
+     *    entry node), the depth is halved, down to a thousandth of the one asked for. */
+    int tip = -1;
+    for (int halvings = 0; halvings <= 10 && tip < 0; halvings++, depth *= 0.5) {
+        double p[3];
+        for (int i = 0; i < 3; i++)
+            p[i] = m->u[3 * entry + i] + depth * u[i];
+        int tt = ns_mesh_locate(m, p, m->node_tets[entry].items[0], ENTRY_ON, b);
+        int inside = 0; /* the tet holding p is one of the entry node's */
+        for (int j = 0; tt >= 0 && j < 4; j++)
+            inside |= m->tet_node[4 * tt + j] == entry && b[j] <= 1.0 - ENTRY_ON;
+        if (inside)
+            tip = node_at(m, s, tt, b, p);
+    }
+    if (tip < 0 || tip == entry || !joined(m, entry, tip)) {
+        while (s->count > base) /* the splits made here, the tip's first */
+            if (ns_remesh_undo(m, s))
+                break;
+        ns_set_err(err, err_sz,
+                   "no tip node could be made inside the entry point, joined to it by an edge");
+        return -1;
+    }
+    nodes[0] = entry;
+    nodes[1] = tip;
+    return 0;
+}
