@@ -224,35 +224,33 @@ static int world_of(const NsMesh *m, const double u[3], int *hint, double x[3])
     return 0;
 }
 
-/* The needle at the current entry (spec.entry_*): its entry track laid into the tissue's mesh
- * (material and world; about one and a half elements along the entry direction, so that the
- * needle starts with two tissue nodes: skin entry itself is not modelled yet, issue 6), the
- * tissue synced, the rod and the coupling made (the set-up of the validation's remeshing cases,
- * engine/validate_remesh.c), and the nodes the track moved recorded so that they go back when
- * the needle leaves. `what` names the caller for messages. */
+/* The needle at the current entry (spec.entry_*): skin entry (sim/remesh_entry.c: the entry
+ * node made on the surface at the entry point, the tip node a tenth of an element inside it,
+ * both on the coupling's undo stack), the tissue synced, the rod and the coupling made, and the
+ * nodes moved recorded so that they go back when the needle leaves. `what` names the caller
+ * for messages. */
 static int place_needle(Run *r, const char *what, char *err, int err_sz)
 {
     NsScenario *sc = &r->sc;
     NsRunSpec *sp = &r->spec;
     NsMesh *M = &r->tissue.mesh;
     double h = sc->resolution > 0.0 ? sc->resolution : ns_mesh_mean_edge(&r->orig);
-    double a[3], b[3];
-    for (int i = 0; i < 3; i++) {
-        a[i] = sp->entry_point[i];
-        b[i] = a[i] + 1.5 * h * sp->entry_dir[i];
-    }
-    int nodes[64];
+    int nodes[2], np = 2;
     char e2[512];
-    int np = ns_needle_path_lay(M, a, b, 0.75, nodes, 64, e2, sizeof e2);
-    if (np < 2) {
-        ns_set_err(err, err_sz,
-                   "%s: no needle track can start at (%g, %g, %g) m along (%g, %g, %g): %s", what,
-                   a[0], a[1], a[2], sp->entry_dir[0], sp->entry_dir[1], sp->entry_dir[2],
-                   np < 0 ? e2 : "it crosses fewer than 2 mesh nodes");
+    NsRemeshStack entry;
+    ns_remesh_stack_init(&entry);
+    if (ns_remesh_skin_entry(M, &entry, sp->entry_point, sp->entry_dir, 0.1 * h, nodes, e2,
+                             sizeof e2)) {
+        ns_remesh_stack_free(&entry);
+        ns_set_err(err, err_sz, "%s: the needle cannot enter at (%g, %g, %g) m along (%g, %g, %g): %s",
+                   what, sp->entry_point[0], sp->entry_point[1], sp->entry_point[2],
+                   sp->entry_dir[0], sp->entry_dir[1], sp->entry_dir[2], e2);
         return -1;
     }
-    if (ns_tissue_sync_topology(&r->tissue, err, err_sz))
+    if (ns_tissue_sync_topology(&r->tissue, err, err_sz)) {
+        ns_remesh_stack_free(&entry);
         return -1;
+    }
     /* The needle: four nodes 5 mm apart outside, behind the entry node, then the track. */
     double x[3 * 68], d[3];
     memcpy(d, sp->entry_dir, sizeof d);
@@ -293,8 +291,10 @@ static int place_needle(Run *r, const char *what, char *err, int err_sz)
     double n1 = sqrt(dot3(d1, d1));
     for (int k = 0; k < 3; k++)
         d1[k] /= n1;
-    if (ns_rod_init(&r->rod, x, 4 + np, d1, 2, &rp, err, err_sz))
+    if (ns_rod_init(&r->rod, x, 4 + np, d1, 2, &rp, err, err_sz)) {
+        ns_remesh_stack_free(&entry);
         return -1;
+    }
     r->have_rod = true;
     NsCouplingParams cp = ns_default_coupling_params();
     cp.remesh = 1;
@@ -324,9 +324,14 @@ static int place_needle(Run *r, const char *what, char *err, int err_sz)
     }
     NsNeedlePath path;
     if (ns_needle_path_init(&path, M, nodes, np, s, err, err_sz) ||
-        ns_coupled_init(&r->c, &r->tissue, &r->rod, &path, &cp, err, err_sz))
+        ns_coupled_init(&r->c, &r->tissue, &r->rod, &path, &cp, err, err_sz)) {
+        ns_remesh_stack_free(&entry);
         return -1;
+    }
     r->have_c = true;
+    /* The skin entry's splits and snap are the first entries of the needle's undo stack. */
+    ns_remesh_stack_free(&r->c.remesh);
+    r->c.remesh = entry;
     const NsMesh *O = &r->orig;
     for (int i = 0; i < O->node_slots; i++)
         if (ns_mesh_node_alive(O, i) && memcmp(O->u + 3 * i, M->u + 3 * i, 24) != 0 &&

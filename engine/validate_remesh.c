@@ -6,9 +6,9 @@
  * step must pass the structural checks (ns_coupled_check_structure).
  *
  * The gel scene: a gel block (corotational, E 30 kPa, nu 0.45) on a structured grid, its four side
- * faces clamped, the needle entering the x = 0 face along +x off the grid lines. The first
- * grid cell of the track is laid into the mesh (ns_needle_path_lay: the needle has punctured
- * the skin); from there the tip remeshes its way in. */
+ * faces clamped, the needle entering the x = 0 face along +x off the grid lines. The needle
+ * punctures that face (ns_remesh_skin_entry: an entry node on the surface, the tip node a tenth
+ * of a grid cell inside); from there the tip remeshes its way in. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -46,6 +46,11 @@ typedef struct Run {
     int twist_step;   /* the step at which the twist began (-1: none) */
     int max_substeps; /* most pieces a step's remeshing was cut into (§3.4.1) */
     long substeps;    /* pieces over all steps */
+    /* At the end: the needle's path in the tissue (world positions of its tissue nodes, entry
+     * first), and where the material point the tip was at when the twist began is now */
+    double *shape;
+    int shape_count;
+    double twist_point[3];
 } Run;
 
 static int fail(NsValidateResult *r, const char *why)
@@ -81,13 +86,8 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
            hi[3] = {in->len, 0.5 * in->width, 0.5 * in->width};
     if (ns_mesh_grid_box(&mesh, lo, hi, nx, nyz, nyz, 0, err, sizeof err))
         return fail(r, err);
-    double a[3] = {0.0, in->offset[0], in->offset[1]}, b[3] = {2.2 * in->h, a[1], a[2]};
-    int nodes[16];
-    int np = ns_needle_path_lay(&mesh, a, b, 0.75, nodes, 16, err, sizeof err);
-    if (np < 2) {
-        ns_mesh_free(&mesh);
-        return fail(r, np < 0 ? err : "the entry track has fewer than 2 nodes");
-    }
+    double a[3] = {0.0, in->offset[0], in->offset[1]}, dir[3] = {1.0, 0.0, 0.0};
+    int nodes[2], np = 2;
     NsTissueMaterial mat = {ns_fem_material(NS_MODEL_COROTATIONAL, 30e3, 0.45, 3.0, 3.0), 1000.0};
     NsTissueParams tp = ns_default_tissue_params();
     tp.gamma = 0.55;
@@ -98,13 +98,22 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     if (rc)
         return fail(r, err);
     const NsMesh *M = &tissue.mesh;
+    /* Skin entry, its splits the first entries of the needle's undo stack. */
+    NsRemeshStack entry;
+    ns_remesh_stack_init(&entry);
+    if (ns_remesh_skin_entry(&tissue.mesh, &entry, a, dir, 0.1 * in->h, nodes, err, sizeof err) ||
+        ns_tissue_sync_topology(&tissue, err, sizeof err)) {
+        ns_remesh_stack_free(&entry);
+        ns_tissue_free(&tissue);
+        return fail(r, err);
+    }
     for (int i = 0; i < M->node_slots; i++) {
         const double *u = M->u + 3 * i;
         if (fabs(fabs(u[1]) - 0.5 * in->width) < 1e-9 || fabs(fabs(u[2]) - 0.5 * in->width) < 1e-9)
             for (int c = 0; c < 3; c++)
                 ns_tissue_fix_dof(&tissue, i, c, 1);
     }
-    /* The needle: 4 edges of 5 mm outside (held by the sleeve), then the laid track. */
+    /* The needle: 4 edges of 5 mm outside (held by the sleeve), the entry node, the tip. */
     int n = 4 + np;
     double x[3 * 24];
     const double *e0 = M->x + 3 * nodes[0];
@@ -129,6 +138,7 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     double d1[3] = {0.0, 1.0, 0.0};
     NsRod rod;
     if (ns_rod_init(&rod, x, n, d1, 2, &rp, err, sizeof err)) {
+        ns_remesh_stack_free(&entry);
         ns_tissue_free(&tissue);
         return fail(r, err);
     }
@@ -142,10 +152,13 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     NsCoupled c;
     if (ns_needle_path_init(&path, M, nodes, np, s, err, sizeof err) ||
         ns_coupled_init(&c, &tissue, &rod, &path, &cp, err, sizeof err)) {
+        ns_remesh_stack_free(&entry);
         ns_rod_free(&rod);
         ns_tissue_free(&tissue);
         return fail(r, err);
     }
+    ns_remesh_stack_free(&c.remesh);
+    c.remesh = entry;
     /* The sleeve drives the needle in by `depth`; a twist pauses the insertion while the base
      * turns half a revolution (pause steps). */
     int pause = in->twist_at > 0.0 ? (int)ceil(M_PI / (in->twist_rate * in->dt) - 1e-9) : 0;
@@ -153,7 +166,7 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
     run->tip = malloc((size_t)steps * 3 * sizeof *run->tip);
     if (!run->tip)
         rc = fail(r, "out of memory");
-    double entry_x = e0[0], turned = 0.0;
+    double entry_x = e0[0], turned = 0.0, twist_u[3] = {0, 0, 0};
     for (int k = 0; k < steps && rc == 0; k++) {
         double depth = rod.x[3 * (rod.nodes - 1)] - entry_x;
         if (in->twist_at > 0.0 && depth >= in->twist_at && run->twist_step < 0)
@@ -185,6 +198,8 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
                 snprintf(run->first_failure, sizeof run->first_failure, "step %d: %.200s", k, err);
         }
         memcpy(run->tip + 3 * k, rod.x + 3 * (rod.nodes - 1), 3 * sizeof(double));
+        if (k == run->twist_step) /* the material point the tip is at as the twist begins */
+            memcpy(twist_u, M->u + 3 * c.path.node[c.path.count - 1], sizeof twist_u);
         const double *xt = tissue.mesh.x + 3 * c.path.node[c.path.count - 1],
                      *xr = rod.x + 3 * (rod.nodes - 1);
         run->tip_gap = fmax(run->tip_gap, sqrt((xt[0] - xr[0]) * (xt[0] - xr[0]) +
@@ -195,6 +210,24 @@ static int insert(const Insertion *in, Run *run, NsValidateResult *r)
                     1e3 * rod.x[3 * (rod.nodes - 1)], 1e3 * rod.x[3 * (rod.nodes - 1) + 1],
                     1e3 * rod.x[3 * (rod.nodes - 1) + 2], st.remesh_kind, st.bevel_force);
         run->steps = k + 1;
+    }
+    if (rc == 0 && run->twist_step >= 0) {
+        /* The path the needle lies on in the deformed tissue, and the twist point on it. */
+        run->shape = malloc(3 * (size_t)c.path.count * sizeof *run->shape);
+        double b[4];
+        int t = ns_mesh_locate(M, twist_u, -1, 1e-9, b);
+        if (!run->shape || t < 0) {
+            rc = fail(r, t < 0 ? "the twist point is not in the tissue" : "out of memory");
+        } else {
+            for (int i = 0; i < c.path.count; i++)
+                memcpy(run->shape + 3 * i, M->x + 3 * c.path.node[i], 3 * sizeof(double));
+            run->shape_count = c.path.count;
+            for (int i = 0; i < 3; i++) {
+                run->twist_point[i] = 0.0;
+                for (int j = 0; j < 4; j++)
+                    run->twist_point[i] += b[j] * M->x[3 * M->tet_node[4 * t + j] + i];
+            }
+        }
     }
     ns_coupled_free(&c);
     ns_rod_free(&rod);
@@ -353,21 +386,39 @@ static double fit_circle(const double *p, int n, double *rms, double *off)
     return R;
 }
 
-/* The entry tracks of the brachytherapy cases: 2 cm from the perineum (z = 0) along +z, at
- * lateral offsets tried in turn until the mesh takes one without inverting a tet
- * (tests/bench_coupling.c uses the same). */
+/* The entry points of the brachytherapy cases on the perineum (z = 0), the needle along +z, at
+ * lateral offsets taken in turn. */
 static const double entry_offsets[8][2] = {{0.008, 0.0},     {-0.008, 0.0},  {0.010, -0.004},
                                            {-0.010, -0.004}, {0.008, 0.004}, {-0.008, 0.004},
                                            {0.012, 0.0},     {-0.012, 0.0}};
 
-/* A needle on the laid track nodes[0 .. np) of the brachytherapy tissue: four 5 mm edges held
- * by the sleeve along -z, then the track; remeshing on, cutting force 0.2 N everywhere; a bevel
- * of bevel_deg (0: symmetric). Nodes the track moved away from orig are recorded as moved, so
- * they go back when the needle leaves. *entry_z: the entry's depth (copied: remeshing may move
- * the mesh's arrays). Returns 0, or -1 with a message (nothing left to free). */
+/* Skin entry into the brachytherapy tissue at entry offset o (its splits onto *entry, the tissue
+ * synced): nodes[0] the entry node, nodes[1] the tip, a tenth of the mean edge inside. Returns
+ * 0, or -1 with a message (the stack freed). */
+static int brachy_entry(NsTissue *tissue, int o, NsRemeshStack *entry, int nodes[2], char *err,
+                        int err_sz)
+{
+    const double *of = entry_offsets[o % 8];
+    double a[3] = {of[0], of[1], 0.0}, d[3] = {0.0, 0.0, 1.0};
+    ns_remesh_stack_init(entry);
+    if (ns_remesh_skin_entry(&tissue->mesh, entry, a, d, 0.1 * ns_mesh_mean_edge(&tissue->mesh),
+                             nodes, err, err_sz) ||
+        ns_tissue_sync_topology(tissue, err, err_sz)) {
+        ns_remesh_stack_free(entry);
+        return -1;
+    }
+    return 0;
+}
+
+/* A needle at the skin entry nodes[0 .. np) (brachy_entry) of the brachytherapy tissue: four
+ * 5 mm edges held by the sleeve along -z, then the entry and tip nodes; remeshing on, cutting
+ * force 0.2 N everywhere; a bevel of bevel_deg (0: symmetric). The entry's stack becomes the
+ * needle's (freed on failure); nodes moved away from orig are recorded as moved, so they go back
+ * when the needle leaves. *entry_z: the entry's depth (copied: remeshing may move the mesh's
+ * arrays). Returns 0, or -1 with a message (nothing left to free). */
 static int brachy_needle(NsTissue *tissue, const NsMesh *orig, const int *nodes, int np,
-                         double bevel_deg, NsRod *rod, NsCoupled *c, double *entry_z, char *err,
-                         int err_sz)
+                         NsRemeshStack *entry, double bevel_deg, NsRod *rod, NsCoupled *c,
+                         double *entry_z, char *err, int err_sz)
 {
     const NsMesh *M = &tissue->mesh;
     double x[3 * 72];
@@ -388,8 +439,10 @@ static int brachy_needle(NsTissue *tissue, const NsMesh *orig, const int *nodes,
         rp.bevel_angle = bevel_deg * M_PI / 180.0;
     }
     double d1[3] = {1.0, 0.0, 0.0};
-    if (ns_rod_init(rod, x, 4 + np, d1, 2, &rp, err, err_sz))
+    if (ns_rod_init(rod, x, 4 + np, d1, 2, &rp, err, err_sz)) {
+        ns_remesh_stack_free(entry);
         return -1;
+    }
     NsCouplingParams cp = ns_default_coupling_params();
     cp.remesh = 1;
     for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
@@ -397,9 +450,12 @@ static int brachy_needle(NsTissue *tissue, const NsMesh *orig, const int *nodes,
     NsNeedlePath path;
     if (ns_needle_path_init(&path, M, nodes, np, track_length(M, nodes, np), err, err_sz) ||
         ns_coupled_init(c, tissue, rod, &path, &cp, err, err_sz)) {
+        ns_remesh_stack_free(entry);
         ns_rod_free(rod);
         return -1;
     }
+    ns_remesh_stack_free(&c->remesh);
+    c->remesh = *entry;
     for (int i = 0; i < orig->node_slots; i++)
         if (ns_mesh_node_alive(orig, i) && memcmp(orig->u + 3 * i, M->u + 3 * i, 24) != 0 &&
             ns_remesh_record_original(&c->remesh, i, orig->u + 3 * i)) {
@@ -424,31 +480,32 @@ static int remesh_restore(NsValidateResult *r)
     }
     uint64_t h0 = ns_mesh_topology_hash(&orig);
     double h = ns_mesh_mean_edge(&orig);
-    int nodes[64], np = -1;
-    for (int o = 0; o < 8 && np < 2; o++) {
-        const double *of = entry_offsets[o];
-        double a[3] = {of[0], of[1], 0.0}, b[3] = {of[0], of[1], 0.02};
-        np = ns_needle_path_lay(&sc.mesh, a, b, 0.75, nodes, 64, err, sizeof err);
-    }
+    int nodes[2], np = 2;
     NsTissueParams tp = ns_default_tissue_params();
     tp.gamma = 0.55;
     tp.beta = 0.25 * 1.05 * 1.05;
     NsTissue tissue;
-    int rc = np >= 2 ? ns_scenario_tissue(&sc, &tp, &tissue, err, sizeof err) : -1;
+    int rc = ns_scenario_tissue(&sc, &tp, &tissue, err, sizeof err);
     ns_scenario_free(&sc);
     if (rc) {
         ns_mesh_free(&orig);
-        return fail(r, np < 2 ? "no entry track could be laid" : err);
+        return fail(r, err);
     }
     const NsMesh *M = &tissue.mesh;
     NsRod rod;
     NsCoupled c;
+    NsRemeshStack entry;
     double entry_z;
-    if (brachy_needle(&tissue, &orig, nodes, np, 0.0, &rod, &c, &entry_z, err, sizeof err)) {
+    if (brachy_entry(&tissue, 0, &entry, nodes, err, sizeof err) ||
+        brachy_needle(&tissue, &orig, nodes, np, &entry, 0.0, &rod, &c, &entry_z, err,
+                      sizeof err)) {
         ns_tissue_free(&tissue);
         ns_mesh_free(&orig);
         return fail(r, err);
     }
+    /* The skin entry's own splits other than the tip's: still on the stack when the needle
+     * leaves (the exit undoes them). */
+    int entry_splits = c.remesh.count - 1;
     /* In at 20 mm/s to 6 cm deep, then out at 20 mm/s until the needle has left. */
     int ops[5] = {0}, failures = 0, steps = 0, in_steps = 0, exited = 0, left_on_stack = -1;
     double depth = 0.0, dmin = 180.0, dmax = 0.0;
@@ -497,19 +554,20 @@ static int remesh_restore(NsValidateResult *r)
         /* Algorithm 2 itself must have undone every split by the time the needle leaves: the
          * exit's clean-up finds the stack empty. */
         r->pass = exited && h1 == h0 && r->error <= r->tolerance && failures == 0 &&
-                  c.remesh.count == 0 && left_on_stack == 0;
+                  c.remesh.count == 0 && left_on_stack == entry_splits;
         ns_validate_detail(r,
-                           "brachytherapy tissue (%d tets, mean edge %.1f mm): 2 cm entry track "
-                           "laid, then in at 20 mm/s to %.0f mm deep (%d steps of 10 ms) and out "
+                           "brachytherapy tissue (%d tets, mean edge %.1f mm): skin entry, then "
+                           "in at 20 mm/s to %.0f mm deep (%d steps of 10 ms) and out "
                            "until the needle left (%d steps in all, %s); topology hash %s the "
-                           "original's; splits left for the exit to undo %d; nodes back within "
+                           "original's; splits left for the exit to undo %d (want the skin "
+                           "entry's own, %d); nodes back within "
                            "%.2e m; remesh: %d snaps, %d edge, %d "
                            "face, %d tet splits; dihedral angles near the needle in [%.1f, "
                            "%.1f] deg; structural failures %d%s%s",
                            orig.tet_alive, 1e3 * h, 60.0, in_steps, steps,
                            exited ? "exited" : "NOT exited", h1 == h0 ? "equals" : "DIFFERS from",
-                           left_on_stack, back, ops[1], ops[2], ops[3], ops[4], dmin, dmax,
-                           failures, failures ? ": " : "", first);
+                           left_on_stack, entry_splits, back, ops[1], ops[2], ops[3], ops[4], dmin,
+                           dmax, failures, failures ? ": " : "", first);
     }
     ns_coupled_free(&c);
     ns_rod_free(&rod);
@@ -740,35 +798,35 @@ static double two_arc_fit(const double *s, const double *y, int n, double s0, do
 typedef struct Bend {
     double off;        /* largest distance from the path's plane [m] */
     double kb, kl;     /* curvature over the 15 mm before the twist point and the last 15 [1/m] */
-    double window;     /* windows: distance from the twist point from which every 10 mm
-                          window's curvature has the reversed sign (HUGE_VAL: never) [m] */
     double sb, k1, k2; /* the two-arc fit: its joint (from the twist point) [m], curvatures */
     double rms;        /* the fit's RMS residual [m] */
 } Bend;
 
-static int bend_analyse(const Run *run, Bend *b)
+/* The bend of the path through points p[0 .. n) (in the needle's direction), tw its twist point
+ * (on the path or near it). */
+static int bend_analyse(const double *p, int n, const double tw[3], Bend *b)
 {
-    int n = run->steps;
     double c[3], e[9], dir = 0.0;
-    b->off = path_plane(run->tip, n, c, e);
+    b->off = path_plane(p, n, c, e);
     for (int i = 0; i < 3; i++) /* the along axis points the way the needle went */
-        dir += (run->tip[3 * (n - 1) + i] - run->tip[i]) * e[i];
+        dir += (p[3 * (n - 1) + i] - p[i]) * e[i];
     for (int i = 0; dir < 0.0 && i < 3; i++)
         e[i] = -e[i];
     double *s = calloc(2 * (size_t)n + 2, sizeof *s), *y = s ? s + n + 1 : NULL;
     if (!s)
         return -1;
-    /* Keep one sample per position: the paused steps repeat the tip. */
+    /* Keep one sample per position: the paused steps repeat the tip (and the twist point's
+     * projection s_tw is taken as is). */
     int m = 0;
     double s_tw = 0.0;
+    for (int i = 0; i < 3; i++)
+        s_tw += (tw[i] - c[i]) * e[i];
     for (int k = 0; k < n; k++) {
         double a = 0.0, q = 0.0;
         for (int i = 0; i < 3; i++) {
-            a += (run->tip[3 * k + i] - c[i]) * e[i];
-            q += (run->tip[3 * k + i] - c[i]) * e[3 + i];
+            a += (p[3 * k + i] - c[i]) * e[i];
+            q += (p[3 * k + i] - c[i]) * e[3 + i];
         }
-        if (k == run->twist_step)
-            s_tw = a;
         if (m > 0 && a <= s[m - 1] + 1e-6)
             continue;
         s[m] = a;
@@ -780,18 +838,6 @@ static int bend_analyse(const Run *run, Bend *b)
         m = 1; /* no path: every fit below is empty and the case fails */
     b->kb = parabola_curvature(s, y, m, s_tw - 0.015, s_tw, &cnt);
     b->kl = parabola_curvature(s, y, m, s[m - 1] - 0.015, s[m - 1], &cnt);
-    /* Windows: the first window start (10 mm windows, every sample from 10 mm before the twist
-     * on) from which every window's curvature has the other sign up to the path's end. The
-     * tip's step-to-step jitter (a few tenths of a mm) moves single windows' curvatures by
-     * several 1/m, so this is reported, not judged. */
-    b->window = HUGE_VAL;
-    for (int k = m - 1; k >= 0 && s[k] >= s_tw - 0.01; k--) {
-        if (s[k] + 0.01 > s[m - 1])
-            continue;
-        if (parabola_curvature(s, y, m, s[k], s[k] + 0.01, &cnt) * b->kb >= 0.0)
-            break;
-        b->window = s[k] - s_tw;
-    }
     /* The two-arc fit over the path from 15 mm before the twist point: the joint that fits
      * best, searched every 0.1 mm from 10 mm before the twist point to 25 mm after it (and
      * 3 mm short of the path's end), estimates where the bend reverses from all the samples. */
@@ -818,7 +864,16 @@ static int bend_analyse(const Run *run, Bend *b)
     return 0;
 }
 
-static int double_bend_run(NsBevelModel model, Run *run, Bend *b, NsValidateResult *r)
+static double dist3(const double *a, const double *b)
+{
+    return sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                (a[2] - b[2]) * (a[2] - b[2]));
+}
+
+/* One double-bend insertion with the given steering model: the bend of the needle's path at
+ * the end (*path) and of the tip's trajectory (*tipb). */
+static int double_bend_run(NsBevelModel model, Run *run, Bend *path, Bend *tipb,
+                           NsValidateResult *r)
 {
     Insertion in = default_insertion();
     in.tip = NS_TIP_BEVEL;
@@ -831,23 +886,47 @@ static int double_bend_run(NsBevelModel model, Run *run, Bend *b, NsValidateResu
     int rc = insert(&in, run, r);
     if (rc == 0 && run->twist_step < 0)
         rc = fail(r, "the twist depth was never reached");
-    if (rc == 0 && bend_analyse(run, b))
+    /* The needle's path: its tissue nodes' world positions at the end, every segment sampled
+     * every 0.25 mm (straight between nodes, as the rod is). */
+    double *dense = NULL;
+    int nd = 0;
+    if (rc == 0 && run->shape_count >= 2) {
+        int cap = 1;
+        for (int i = 1; i < run->shape_count; i++)
+            cap += 1 + (int)ceil(dist3(run->shape + 3 * (i - 1), run->shape + 3 * i) / 0.25e-3);
+        dense = malloc(3 * (size_t)cap * sizeof *dense);
+        for (int i = 1; dense && i < run->shape_count; i++) {
+            const double *a = run->shape + 3 * (i - 1), *z = run->shape + 3 * i;
+            int pieces = 1 + (int)ceil(dist3(a, z) / 0.25e-3);
+            for (int j = i == 1 ? 0 : 1; j <= pieces && nd < cap; j++, nd++)
+                for (int k = 0; k < 3; k++)
+                    dense[3 * nd + k] = a[k] + (z[k] - a[k]) * j / pieces;
+        }
+    }
+    if (rc == 0 && (!dense || bend_analyse(dense, nd, run->twist_point, path) ||
+                    bend_analyse(run->tip, run->steps, run->tip + 3 * run->twist_step, tipb)))
         rc = fail(r, "out of memory");
+    free(dense);
+    free(run->shape);
     free(run->tip);
-    run->tip = NULL;
+    run->tip = run->shape = NULL;
     return rc;
 }
 
-/* The nonholonomic arc model is judged (the bar describes its behaviour); our bevel force is
- * run and reported beside it (its reversal lags by the needle's bending length in the gel,
- * docs/remeshing.md). */
+/* The nonholonomic arc model is judged (the bar describes its behaviour) on the tip's
+ * trajectory; our bevel force is run and reported beside it (its reversal lags by the needle's
+ * bending length in the gel, docs/remeshing.md). Also reported: the needle's path through the
+ * tissue at the end of the insertion (its tissue nodes' world positions, the twist point where
+ * the material point the tip was at when the twist began has gone), what an experiment would
+ * photograph. The stiff needle straightens the soft gel's track behind the tip, so its arcs
+ * are flatter than the trajectory's (docs/remeshing.md). */
 static int double_bend(NsValidateResult *r)
 {
     Run ra, rf;
-    Bend a, f;
-    int rc = double_bend_run(NS_BEVEL_ARC, &ra, &a, r);
+    Bend a, ap, f, fp; /* the tip's trajectory and the path at the end, each model */
+    int rc = double_bend_run(NS_BEVEL_ARC, &ra, &ap, &a, r);
     if (rc == 0)
-        rc = double_bend_run(NS_BEVEL_FORCE, &rf, &f, r);
+        rc = double_bend_run(NS_BEVEL_FORCE, &rf, &fp, &f, r);
     if (rc != 0)
         return rc;
     snprintf(r->metric, sizeof r->metric, "bend reversal from the twist point [m]");
@@ -863,24 +942,27 @@ static int double_bend(NsValidateResult *r)
     int arcs = a.k1 * a.kb > 0.0 && fabs(a.k1) >= kn && fabs(a.k2) >= kn && a.k2 / a.k1 < -0.5 &&
                a.rms <= 0.25e-3;
     r->pass = isfinite(a.sb) && fabs(a.sb) <= r->tolerance && arcs && a.kb * a.kl < 0.0 &&
-              a.off <= 1e-3 && ra.structure_failures == 0 && rf.structure_failures == 0;
+              a.off <= 1e-3 && ap.off <= 1e-3 && ra.structure_failures == 0 &&
+              rf.structure_failures == 0;
     ns_validate_detail(
         r,
         "bevel 45 deg nitinol needle 6 cm into the gel block, the base turned 180 deg at 3 cm "
-        "depth (the insertion paused 0.2 s). Nonholonomic arc model (judged): two tangent arcs "
-        "fitted from 15 mm before the twist point join %.2f mm after it (want within 5 mm), "
-        "curvature %.2f then %.2f 1/m (want opposite signs, each at least %.1f, the second at "
-        "least half the first), RMS %.3f mm (want <= 0.25 mm); parabolas: %.2f 1/m "
-        "over the 15 mm before the twist point, %.2f 1/m over the last 15 mm; 10 mm windows "
-        "keep the reversed sign from %.2f mm on; out of plane %.3f mm (want <= 1 mm); remesh "
-        "%d snaps, %d edge, %d face, %d tet splits; dihedral angles near the needle in [%.1f, "
-        "%.1f] deg. Bevel force model (reported): arcs join %.2f mm after the twist point, "
-        "curvature %.2f then %.2f 1/m, RMS %.3f mm; parabolas %.2f before, %.2f 1/m last; "
-        "windows from %.2f mm; out of plane %.3f mm. Structural failures %d%s%s",
-        1e3 * a.sb, a.k1, a.k2, kn, 1e3 * a.rms, a.kb, a.kl, 1e3 * a.window, 1e3 * a.off, ra.ops[1],
-        ra.ops[2], ra.ops[3], ra.ops[4], ra.min_dihedral, ra.max_dihedral, 1e3 * f.sb, f.k1, f.k2,
-        1e3 * f.rms, f.kb, f.kl, 1e3 * f.window, 1e3 * f.off,
-        ra.structure_failures + rf.structure_failures,
+        "depth (the insertion paused 0.2 s). Nonholonomic arc model (judged), the tip's "
+        "trajectory: two tangent arcs fitted from 15 mm before the twist point join %.2f mm "
+        "after it (want within 5 mm), curvature %.2f then %.2f 1/m (want opposite signs, each "
+        "at least %.1f, the second at least half the first), RMS %.3f mm (want <= 0.25 mm); "
+        "parabolas: %.2f 1/m over the 15 mm before the twist point, %.2f 1/m over the last "
+        "15 mm; out of plane %.3f mm (want <= 1 mm, and the path at the end too: %.3f mm). "
+        "The needle's path at the end (reported): arcs join %.2f mm after the twist point, "
+        "%.2f then %.2f 1/m, RMS %.3f mm. Remesh %d snaps, %d edge, %d face, %d tet splits; "
+        "dihedral angles near the needle in [%.1f, %.1f] deg. Bevel force model (reported), "
+        "trajectory: arcs join %.2f mm after the twist point, curvature %.2f then %.2f 1/m, "
+        "RMS %.3f mm, out of plane %.3f mm; path at the end: join %.2f mm, %.2f then %.2f "
+        "1/m. Structural failures %d%s%s",
+        1e3 * a.sb, a.k1, a.k2, kn, 1e3 * a.rms, a.kb, a.kl, 1e3 * a.off, 1e3 * ap.off, 1e3 * ap.sb,
+        ap.k1, ap.k2, 1e3 * ap.rms, ra.ops[1], ra.ops[2], ra.ops[3], ra.ops[4], ra.min_dihedral,
+        ra.max_dihedral, 1e3 * f.sb, f.k1, f.k2, 1e3 * f.rms, 1e3 * f.off, 1e3 * fp.sb, fp.k1,
+        fp.k2, ra.structure_failures + rf.structure_failures,
         ra.structure_failures + rf.structure_failures ? ": " : "",
         ra.structure_failures ? ra.first_failure : rf.first_failure);
     return 0;
@@ -918,24 +1000,15 @@ typedef struct Cycle {
 static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy, char *err,
                      int err_sz)
 {
-    NsMesh *M = &tissue->mesh;
-    /* The entry track at one of the lateral offsets the mesh takes, a different one each
-     * cycle where possible. */
-    int nodes[64], np = -1;
-    for (int o = 0; o < 8 && np < 2; o++) {
-        const double *of = entry_offsets[(cycle + o) % 8];
-        double a[3] = {of[0], of[1], 0.0}, b[3] = {of[0], of[1], 0.02};
-        np = ns_needle_path_lay(M, a, b, 0.75, nodes, 64, err, err_sz);
-    }
-    if (np >= 0 && np < 2)
-        ns_set_err(err, err_sz, "cycle %d: the entry track has fewer than 2 nodes", cycle);
-    if (np < 2 || ns_tissue_sync_topology(tissue, err, err_sz))
-        return -1;
+    /* Skin entry at one of the lateral offsets, a different one each cycle. */
+    int nodes[2], np = 2;
+    NsRemeshStack entry;
     NsRod rod;
     NsCoupled c;
     double entry_z;
-    if (brachy_needle(tissue, orig, nodes, np, 30.0 /* the twists steer it */, &rod, &c, &entry_z,
-                      err, err_sz))
+    if (brachy_entry(tissue, cycle, &entry, nodes, err, err_sz) ||
+        brachy_needle(tissue, orig, nodes, np, &entry, 30.0 /* the twists steer it */, &rod, &c,
+                      &entry_z, err, err_sz))
         return -1;
     int rc = 0;
     /* In at 40 mm/s, twisting, to the cycle's depth; then out until the needle has left. The
