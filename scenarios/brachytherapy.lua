@@ -26,10 +26,12 @@
 --
 -- The run (needlesim run scenarios/brachytherapy.lua): two needles, one after the other, through
 -- the template holes at x = +8 and -10 mm, y = -4 mm (either side of the urethra, above the
--- rectum) into the prostate; on the way back each leaves two seeds at the planned depths, then
--- comes all the way out. A flexible bevel-tip needle by default, spun as it goes in so that its
--- bevel does not steer it off the line (the paper's ProsFB; `--set needle.kind=stiff` is its
--- ProsSS). The urethra, rectum and pubic arch are obstacles; each one entered costs 25 points.
+-- rectum) into the prostate, each guided as on transrectal ultrasound: in, spun, for 3 cm; the
+-- bevel then turned towards the base seed's target (the prostate moves away from the needle as
+-- it goes in) and the needle pushed on until its tip reaches the target where the tissue has
+-- carried it; a seed left there, back to the mid seed's target, a second seed, then all the way
+-- out. A flexible bevel-tip needle by default (the paper's ProsFB; `--set needle.kind=stiff` is
+-- its ProsSS, whose symmetric tip does not steer). The urethra, rectum and pubic arch are obstacles; each one entered costs 25 points.
 local ns = require "needlesim"
 local act = require "needlesim.actions"
 local M = ns.materials
@@ -59,9 +61,8 @@ local pubic_arch = shape.union(
   shape.capsule { a = { -0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 },
   shape.capsule { a = { 0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 })
 
--- The template holes (x, y on the perineum) and the planned seed depths from the skin [m]. The
--- holes sit where the mesh lets a needle's entry track be laid (the puncture of the skin itself
--- is not modelled yet: docs/remeshing.md); -8 mm is not such a place on this mesh, -10 mm is.
+-- The template holes (x, y on the perineum) and the planned seed depths from the skin [m] (the
+-- targets; the needle punctures the skin at the hole, docs/remeshing.md "Skin entry").
 local holes = { { 0.008, -0.004 }, { -0.010, -0.004 } }
 local seed_depths = { 0.060, 0.048 }
 
@@ -100,9 +101,14 @@ return ns.scenario {
       if i > 1 then
         act.next_needle { point = { hole[1], hole[2], 0 }, direction = { 0, 0, 1 } }
       end
-      act.insert { speed = 0.02, depth = seed_depths[1], spin = 2 * math.pi } -- 20 mm/s, 1 turn/s
+      local base, mid = string.format("base seed %d", i), string.format("mid seed %d", i)
+      -- 20 mm/s, spun at 1 turn/s (straight) through the perineum; then the bevel turned to
+      -- face the base seed's target and the needle pushed on, unspun, until it reaches it
+      act.insert { speed = 0.02, depth = 0.03, spin = 2 * math.pi }
+      act.aim { to = base }
+      act.insert { speed = 0.02, to = base }
       act.drop_seed {}
-      act.retract { speed = 0.02, depth = seed_depths[2] }
+      act.retract { speed = 0.02, to = mid }
       act.drop_seed {}
       act.retract { speed = 0.02 } -- all the way out
     end

@@ -54,7 +54,7 @@ return ns.scenario {
     },
     -- The phantom needle: 0.83 mm nitinol, bevel tip (the paper's §4).
     needle = ns.needle { kind = "flexible", bevel_deg = ns.param("needle.bevel_deg", 30) },
-    -- On a lattice line (z = 2 h = 2.6 cm), where the entry track can be laid into the mesh.
+    -- At z = 2 h = 2.6 cm, one lattice spacing below the top markers.
     -- The bevel faces sideways (+y): the needle bends in the horizontal plane, as in the paper.
     entry = { point = { 0, 0, 2 * h }, direction = { 1, 0, 0 }, bevel_toward = { 0, 1, 0 } },
     markers = markers,

@@ -253,6 +253,32 @@ bad_running needle_still_in 's/act.wait { time = 0.2 }/act.next_needle { point =
     "needle_still_in.lua:[0-9]+: act.next_needle: the needle is still in the tissue"
 bad_running too_deep 's/depth = 0.03 }/depth = 0.3 }/' \
     "too_deep.lua(:[0-9]+: act.insert: the needle does not advance|: step [0-9]+ .*failed)"
+bad_running to_unknown 's/depth = 0.03 }/to = "targte" }/' \
+    "to_unknown.lua:[0-9]+: act.insert: 'to' must name a target of the scenario \(got targte; targets: target\)"
+bad_running to_and_depth 's/depth = 0.03 }/depth = 0.03, to = "target" }/' \
+    "to_and_depth.lua:[0-9]+: act.insert: give exactly one of 'depth' \(a number \[m\]\) and 'to'"
+bad_running aim_unknown 's/act.wait { time = 0.2 }/act.aim { to = 3 }/' \
+    "aim_unknown.lua:[0-9]+: act.aim: 'to' must name a target of the scenario \(got 3\)"
+
+# act.insert{to = target}: in until the tip reaches the target where the tissue has carried it
+# (the tutorial's target, pushed deeper than the 3 cm it starts at); act.retract{to} back to it.
+sed -e 's/act.insert { speed = 0.02, depth = 0.03 }/act.insert { speed = 0.02, to = "target" }; act.aim { to = "target" }; act.retract { speed = 0.02, depth = 0.02 }; act.insert { speed = 0.02, to = "target" }/' \
+    "$TUT" >"$TMP/to.lua"
+"$BIN" run "$TMP/to.lua" -o "$TMP/o_to" --no-render --quiet >/dev/null 2>"$TMP/err_to"
+rc=$?
+python3 - "$TMP/o_to/report.json" "$TMP/o_to/trajectory.csv" <<'PY' >"$TMP/py_to" 2>&1
+import csv, json, sys
+r = json.load(open(sys.argv[1]))
+t = r["targets"][0]
+rows = list(csv.DictReader(open(sys.argv[2])))
+deepest = max(float(w["depth_m"]) for w in rows)
+# The target moved deeper than its 30 mm; the tip went that far, not just 30 mm, and ended at it.
+assert deepest > 0.0302, deepest
+assert t["error_mm"] < 1.0, t
+print("deepest %.2f mm, tip %.2f mm from the target" % (1e3 * deepest, t["error_mm"]))
+PY
+prc=$?
+if [ $rc = 0 ] && [ $prc = 0 ]; then pass "act.insert{to}, act.retract, act.aim: $(cat "$TMP/py_to")"; else fail "act.insert{to}" "exit $rc: $(head -1 "$TMP/err_to") $(tail -1 "$TMP/py_to")"; fi
 
 # --set: a key the scenario does not read is an error naming the file and the key.
 "$BIN" run "$TUT" --set needle.kynd=stiff -o "$TMP/o_set" --quiet >/dev/null 2>"$TMP/err_set"

@@ -95,17 +95,51 @@ local function stall_watch(message, sign, wanted)
     end
 end
 
---- act.insert{speed, depth, spin}: push the needle in at `speed` [m/s] until its tip is `depth`
--- [m] past the entry point (measured along the entry direction), the base turning at `spin`
--- [rad/s] meanwhile (default 0; spinning a bevel needle as it goes in averages its bend away).
+-- The depth still to go to `depth`, or to the target named `to` as it is now (the target moves
+-- with the tissue): the target's distance ahead of the tip along the tip's direction, what an
+-- operator reads off the ultrasound image. Exactly one of the two is given.
+local function goal(t, name)
+    if (t.depth ~= nil and t.to ~= nil) or (t.depth == nil and t.to == nil and name ~= "retract")
+    then
+        error(fmt("act.%s: give exactly one of 'depth' (a number [m]) and 'to' (a target's name)",
+            name), 3)
+    end
+    if t.to == nil then
+        local depth = t.depth
+        return function() return depth - sim.depth end
+    end
+    local to = t.to
+    if type(to) ~= "string" or sim.targets[to] == nil then
+        local names = {}
+        for k in pairs(sim.targets) do
+            names[#names + 1] = k
+        end
+        table.sort(names)
+        error(fmt("act.%s: 'to' must name a target of the scenario (got %s; targets: %s)", name,
+            tostring(to), #names > 0 and table.concat(names, ", ") or "none"), 3)
+    end
+    return function()
+        local x, p, d = sim.targets[to], sim.tip, sim.tip_direction
+        return (x[1] - p[1]) * d[1] + (x[2] - p[2]) * d[2] + (x[3] - p[3]) * d[3]
+    end
+end
+
+--- act.insert{speed, depth | to, spin}: push the needle in at `speed` [m/s] until its tip is
+-- `depth` [m] past the entry point (measured along the entry direction), or until it reaches
+-- the target named `to` where that target is now (image guidance: the tissue the needle pushes
+-- carries the target deeper), the base turning at `spin` [rad/s] meanwhile (default 0; spinning
+-- a bevel needle as it goes in averages its bend away).
 function act.insert(t)
     running()
-    fields(t, "insert", { "speed", "depth", "spin" })
+    fields(t, "insert", { "speed", "depth", "to", "spin" })
     local speed = number(t, "insert", "speed", GT0, "> 0 [m/s]")
-    local depth = number(t, "insert", "depth", GT0, "> 0 [m]")
+    if t.depth ~= nil then
+        number(t, "insert", "depth", GT0, "> 0 [m]")
+    end
+    local togo = goal(t, "insert")
     local spin = number(t, "insert", "spin", ANY, "[rad/s]", 0)
-    local watch = stall_watch("act.insert: the needle does not advance", 1, depth)
-    while sim.depth < depth do
+    local watch = stall_watch("act.insert: the needle does not advance", 1, sim.depth + togo())
+    while togo() > 0 do
         sim.control.v_insert = speed
         sim.control.twist_rate = spin
         tick()
@@ -114,19 +148,21 @@ function act.insert(t)
     stop()
 end
 
---- act.retract{speed, depth}: pull the needle back at `speed` [m/s] until its tip is `depth`
--- [m] past the entry point. Without `depth` the needle comes all the way out, and on until its
+--- act.retract{speed, depth | to}: pull the needle back at `speed` [m/s] until its tip is `depth`
+-- [m] past the entry point, or back to the target named `to` (as act.insert's `to`: the target
+-- is ahead of the tip again). Without either the needle comes all the way out, and on until its
 -- tip is CLEAR (2 mm) outside the entry point, so the skin settling back does not meet it
 -- (re-entry is not modelled).
 function act.retract(t)
     running()
-    fields(t, "retract", { "speed", "depth" })
+    fields(t, "retract", { "speed", "depth", "to" })
     local speed = number(t, "retract", "speed", GT0, "> 0 [m/s]")
     local depth = number(t, "retract", "depth", GE0, ">= 0 [m]", -1)
-    local out = depth < 0
+    local togo = goal(t, "retract")
+    local out = depth < 0 and t.to == nil
     local watch = stall_watch("act.retract: the needle does not come back", -1,
-        out and -CLEAR or depth)
-    while (out and (not sim.exited or sim.depth > -CLEAR)) or (not out and sim.depth > depth
+        out and -CLEAR or sim.depth + togo())
+    while (out and (not sim.exited or sim.depth > -CLEAR)) or (not out and togo() < 0
         and not sim.exited) do
         sim.control.v_insert = -speed
         tick()
@@ -149,6 +185,52 @@ function act.twist(t)
         sim.control.twist_rate = sign * w
         turned = turned + w * sim.dt
         tick()
+    end
+    stop()
+end
+
+-- The angle [rad] about the tip's direction from the bevel's direction (m2) to the target named
+-- `to`, and the target's distance across the needle [m].
+local function bevel_offset(to)
+    local x, p, d, b = sim.targets[to], sim.tip, sim.tip_direction, sim.bevel_direction
+    local e = { x[1] - p[1], x[2] - p[2], x[3] - p[3] }
+    local ed = e[1] * d[1] + e[2] * d[2] + e[3] * d[3]
+    for j = 1, 3 do
+        e[j] = e[j] - ed * d[j]
+    end
+    local c = { b[2] * e[3] - b[3] * e[2], b[3] * e[1] - b[1] * e[3], b[1] * e[2] - b[2] * e[1] }
+    local sn = c[1] * d[1] + c[2] * d[2] + c[3] * d[3]
+    local cs = b[1] * e[1] + b[2] * e[2] + b[3] * e[3]
+    return math.atan(sn, cs), math.sqrt(e[1] ^ 2 + e[2] ^ 2 + e[3] ^ 2)
+end
+
+--- act.aim{to, rate, within}: turn the needle's base at `rate` [rad/s] (default pi), the
+-- insertion paused, until the bevel faces the target named `to` across the needle, within
+-- `within` [rad] (default 0.2): a bevel-tip needle pushed in next cuts towards it. The tip's
+-- bevel lags the base through the needle's torsion, so the base turns in small steps, each
+-- checked against the bevel's direction. Nothing turns if the target is within 0.1 mm of the
+-- needle's line.
+function act.aim(t)
+    running()
+    fields(t, "aim", { "to", "rate", "within" })
+    if type(t.to) ~= "string" or sim.targets[t.to] == nil then
+        error(fmt("act.aim: 'to' must name a target of the scenario (got %s)", tostring(t.to)), 2)
+    end
+    local rate = number(t, "aim", "rate", GT0, "> 0 [rad/s]", math.pi)
+    local within = number(t, "aim", "within", GT0, "> 0 [rad]", 0.2)
+    local phi, off = bevel_offset(t.to)
+    local way = 1 -- flipped if turning the base one way turns the bevel the other
+    for _ = 1, 200 do
+        if off < 1e-4 or math.abs(phi) <= within then
+            break
+        end
+        local before = math.abs(phi)
+        act.twist { angle = way * (phi < 0 and -1 or 1) * math.min(math.abs(phi), 0.1),
+            rate = rate }
+        phi, off = bevel_offset(t.to)
+        if math.abs(phi) > before + 1e-3 then
+            way = -way
+        end
     end
     stop()
 end
