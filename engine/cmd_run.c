@@ -3,7 +3,7 @@
  * needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--json]
  *
  * The run loop (DESIGN.md "Command line"): the scenario's tissue and needle are built, the
- * needle's entry track is laid into the mesh at the scenario's entry, and every tick the
+ * needle punctures the tissue's surface at the scenario's entry (skin entry), and every tick the
  * scenario's script (scripts/needlesim/actions.lua, on a coroutine) and its on_tick, or a
  * replayed control log, set the needle's controls; seeds are released, the coupled solver steps
  * (paper Algorithm 1 with remeshing at the tip, Algorithm 2), obstacles are checked and the
@@ -242,9 +242,10 @@ static int place_needle(Run *r, const char *what, char *err, int err_sz)
     if (ns_remesh_skin_entry(M, &entry, sp->entry_point, sp->entry_dir, 0.1 * h, nodes, e2,
                              sizeof e2)) {
         ns_remesh_stack_free(&entry);
-        ns_set_err(err, err_sz, "%s: the needle cannot enter at (%g, %g, %g) m along (%g, %g, %g): %s",
-                   what, sp->entry_point[0], sp->entry_point[1], sp->entry_point[2],
-                   sp->entry_dir[0], sp->entry_dir[1], sp->entry_dir[2], e2);
+        ns_set_err(err, err_sz,
+                   "%s: the needle cannot enter at (%g, %g, %g) m along (%g, %g, %g): %s", what,
+                   sp->entry_point[0], sp->entry_point[1], sp->entry_point[2], sp->entry_dir[0],
+                   sp->entry_dir[1], sp->entry_dir[2], e2);
         return -1;
     }
     if (ns_tissue_sync_topology(&r->tissue, err, err_sz)) {

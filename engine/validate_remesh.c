@@ -400,10 +400,12 @@ static int brachy_entry(NsTissue *tissue, int o, NsRemeshStack *entry, int nodes
 {
     const double *of = entry_offsets[o % 8];
     double a[3] = {of[0], of[1], 0.0}, d[3] = {0.0, 0.0, 1.0};
+    char e2[512];
     ns_remesh_stack_init(entry);
     if (ns_remesh_skin_entry(&tissue->mesh, entry, a, d, 0.1 * ns_mesh_mean_edge(&tissue->mesh),
-                             nodes, err, err_sz) ||
-        ns_tissue_sync_topology(tissue, err, err_sz)) {
+                             nodes, e2, sizeof e2) ||
+        ns_tissue_sync_topology(tissue, e2, sizeof e2)) {
+        ns_set_err(err, err_sz, "entry %d at (%g, %g) mm: %s", o, 1e3 * a[0], 1e3 * a[1], e2);
         ns_remesh_stack_free(entry);
         return -1;
     }
@@ -505,7 +507,9 @@ static int remesh_restore(NsValidateResult *r)
     }
     /* The skin entry's own splits other than the tip's: still on the stack when the needle
      * leaves (the exit undoes them). */
-    int entry_splits = c.remesh.count - 1;
+    int entry_splits = 0; /* those that did not make the tip's node */
+    for (int k = 0; k < c.remesh.count; k++)
+        entry_splits += c.remesh.ops[k].node != nodes[1];
     /* In at 20 mm/s to 6 cm deep, then out at 20 mm/s until the needle has left. */
     int ops[5] = {0}, failures = 0, steps = 0, in_steps = 0, exited = 0, left_on_stack = -1;
     double depth = 0.0, dmin = 180.0, dmax = 0.0;
@@ -551,8 +555,8 @@ static int remesh_restore(NsValidateResult *r)
         r->reference = 0.0;
         r->error = back / h;
         r->tolerance = 0.01;
-        /* Algorithm 2 itself must have undone every split by the time the needle leaves: the
-         * exit's clean-up finds the stack empty. */
+        /* Algorithm 2 itself must have undone every split it made by the time the needle
+         * leaves: the exit's clean-up finds only the skin entry's own (other than the tip's). */
         r->pass = exited && h1 == h0 && r->error <= r->tolerance && failures == 0 &&
                   c.remesh.count == 0 && left_on_stack == entry_splits;
         ns_validate_detail(r,
@@ -903,6 +907,8 @@ static int double_bend_run(NsBevelModel model, Run *run, Bend *path, Bend *tipb,
                     dense[3 * nd + k] = a[k] + (z[k] - a[k]) * j / pieces;
         }
     }
+    if (rc == 0 && run->shape_count < 2)
+        rc = fail(r, "the needle's path has fewer than 2 nodes at the end");
     if (rc == 0 && (!dense || bend_analyse(dense, nd, run->twist_point, path) ||
                     bend_analyse(run->tip, run->steps, run->tip + 3 * run->twist_step, tipb)))
         rc = fail(r, "out of memory");

@@ -31,7 +31,8 @@
 -- it goes in) and the needle pushed on until its tip reaches the target where the tissue has
 -- carried it; a seed left there, back to the mid seed's target, a second seed, then all the way
 -- out. A flexible bevel-tip needle by default (the paper's ProsFB; `--set needle.kind=stiff` is
--- its ProsSS, whose symmetric tip does not steer). The urethra, rectum and pubic arch are obstacles; each one entered costs 25 points.
+-- its ProsSS, whose symmetric tip does not steer). The urethra, rectum and pubic arch are
+-- obstacles; each one entered costs 25 points.
 local ns = require "needlesim"
 local act = require "needlesim.actions"
 local M = ns.materials

@@ -545,7 +545,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
      * tip's advance is its mapped world position's progress along the heading; its sideways
      * offset from the arc is dropped, so no strain builds up, and the needle, coupled to the
      * path, follows the cut. The heading persists while the needle is in (pauses and twists
-     * included) and is taken afresh from the tip's tangent after a retraction. */
+     * included) and is taken afresh from the path (path_heading) after a retraction. */
     int arc = r->params.tip == NS_TIP_BEVEL && c->params.bevel_model == NS_BEVEL_ARC;
     double heading[3];
     if (arc && c->state[r->nodes - 1] == NS_FRICTION_DYN_NEG)

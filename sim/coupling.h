@@ -139,7 +139,8 @@ typedef struct NsCouplingStats {
     int remesh_substeps; /* pieces the tip's move was cut into (§3.4.1; 1 = none, 0 = no remesh) */
     int exited;          /* remesh: the needle was withdrawn out of the tissue this step */
     int exit_undone;     /* ... and the splits the exit had to undo beyond the one that made
-                            the tip's node (0 when Algorithm 2 undid the rest on the way out) */
+                            the tip's node (after skin entry: the entry's own surface split, if
+                            it made one; beyond that, 0 when Algorithm 2 undid the rest) */
     double min_dihedral_deg, max_dihedral_deg;
 } NsCouplingStats;
 

@@ -310,6 +310,11 @@ static void set_node(NsMesh *m, int n, const double u[3], const double x[3], con
     memcpy(m->a + 3 * n, a, 3 * sizeof *a);
 }
 
+void ns_remesh_forget_original(NsRemeshStack *s, int n)
+{
+    forget_original(s, n);
+}
+
 /* Forgets node n's original position (its slot died with an undone split). */
 static void forget_original(NsRemeshStack *s, int n)
 {

@@ -17,7 +17,9 @@
  * with the repositioning of u1 (or u2) along the needle segment that maximizes its tets' worst
  * quality, scored by the quality vector of the region (sorted worst first, compared
  * lexicographically), and undone; the best is applied. Quality is signed volume over rms edge
- * length cubed (sim/quality.h), in material coordinates.
+ * length cubed (sim/quality.h), in material coordinates. Ours: with a dihedral floor
+ * (NsRemeshTip.dihedral_floor_deg), the region's worst dihedral angle clipped at the floor ranks
+ * first, the quality vector breaking ties.
  *
  * World position, velocity and acceleration of a new or moved node come from barycentric
  * interpolation in the tet containing its new material position. No Lua, no I/O. */
@@ -90,14 +92,19 @@ int ns_remesh_record_original(NsRemeshStack *s, int n, const double u[3]);
  * there, as for a snap) and forgets the records: the needle has left the tissue. */
 void ns_remesh_release_all(NsMesh *m, NsRemeshStack *s);
 
+/* Forgets node n's recorded original position (if any). */
+void ns_remesh_forget_original(NsRemeshStack *s, int n);
+
 /* Skin entry (§3.4.1, sim/remesh_entry.c): the needle's first penetration at material point a on
- * the tissue's surface, along direction d. The entry node is made at a (a surface node within a
- * quarter of its shortest edge snapped there, else the surface face or edge split at a), then
- * the tip node at depth along d (the simplex containing it split there), joined to the entry
- * node by an edge: the short edge at the skin. The splits are pushed on s and the snap recorded,
- * so that undoing s and releasing its records restores the mesh. nodes[0]: the entry node,
- * nodes[1]: the tip node. Returns 0, or -1 with a message (a not on the surface, d not into the
- * tissue there, or no valid split). */
+ * the tissue's surface, along direction d. The entry node is made at a (a free surface node of
+ * the tet there within 0.75 of its shortest edge, its surrounding surface flat within about 5
+ * degrees, snapped there; else the surface face or edge split at a), then the tip node at depth
+ * along d (the simplex containing it split there; the depth halved while that point lies beyond
+ * the entry node's tets), joined to the entry node by an edge: the short edge at the skin. The
+ * splits are pushed on s and the snap recorded, so that undoing s and releasing its records
+ * restores the mesh. nodes[0]: the entry node, nodes[1]: the tip node. Returns 0, or -1 with a
+ * message (a not on the surface, d not into the tissue there, or no valid split), the mesh and
+ * s then as they were. */
 int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const double d[3],
                          double depth, int nodes[2], char *err, int err_sz);
 

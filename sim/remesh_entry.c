@@ -42,6 +42,34 @@ static int joined(const NsMesh *m, int a, int b)
     return 0;
 }
 
+/* Unit outward normal of face f (opposite node f) of tet t in material space; 0 if degenerate. */
+static int face_normal(const NsMesh *m, int t, int f, double n[3])
+{
+    const int *tn = m->tet_node + 4 * t;
+    int v[3], k = 0;
+    for (int j = 0; j < 4; j++)
+        if (j != f)
+            v[k++] = tn[j];
+    const double *p0 = m->u + 3 * v[0], *p1 = m->u + 3 * v[1], *p2 = m->u + 3 * v[2];
+    const double *po = m->u + 3 * tn[f];
+    double e1[3], e2[3], c[3];
+    for (int i = 0; i < 3; i++) {
+        e1[i] = p1[i] - p0[i];
+        e2[i] = p2[i] - p0[i];
+    }
+    c[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    c[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    c[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    double cn = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), side = 0.0;
+    if (!(cn > 0.0))
+        return 0;
+    for (int i = 0; i < 3; i++)
+        side += c[i] * (po[i] - p0[i]);
+    for (int i = 0; i < 3; i++) /* away from the opposite node: outward */
+        n[i] = (side > 0.0 ? -c[i] : c[i]) / cn;
+    return 1;
+}
+
 static double dist(const double *p, const double *q)
 {
     return sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
@@ -94,6 +122,47 @@ static double star_quality(const NsMesh *m, int n)
     return q;
 }
 
+/* Puts node n's saved state back after a snap that is not kept, and drops the original
+ * position the snap recorded (unless one was recorded before it). */
+static void put_back(NsMesh *m, NsRemeshStack *s, int n, const double su[3], const double sx[3],
+                     const double sv[3], const double sa[3], int recorded_before)
+{
+    memcpy(m->u + 3 * n, su, 3 * sizeof *su);
+    memcpy(m->x + 3 * n, sx, 3 * sizeof *sx);
+    memcpy(m->v + 3 * n, sv, 3 * sizeof *sv);
+    memcpy(m->a + 3 * n, sa, 3 * sizeof *sa);
+    if (!recorded_before)
+        ns_remesh_forget_original(s, n);
+}
+
+/* Unit outward normal (material space) of a boundary face of tet t holding the point of
+ * barycentric coordinates b (a face whose opposite coordinate is about 0). Returns 1, or 0 if
+ * the point is on no boundary face of t. */
+static int surface_normal_at(const NsMesh *m, int t, const double b[4], double n[3])
+{
+    for (int f = 0; f < 4; f++)
+        if (b[f] <= ENTRY_ON && m->tet_adj[4 * t + f] < 0 && face_normal(m, t, f, n))
+            return 1;
+    return 0;
+}
+
+/* Is every boundary face around node n within about 5 degrees of the plane of normal fn? (A
+ * snap then slides the node in the surface: an edge or corner of the tissue keeps its shape.) */
+static int flat_around(const NsMesh *m, int n, const double fn[3])
+{
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++)
+        for (int f = 0; f < 4; f++) {
+            int t = l->items[i];
+            double g[3];
+            if (m->tet_adj[4 * t + f] >= 0 || m->tet_node[4 * t + f] == n)
+                continue; /* not a boundary face, or not one of n's */
+            if (!face_normal(m, t, f, g) || g[0] * fn[0] + g[1] * fn[1] + g[2] * fn[2] < 0.996)
+                return 0;
+        }
+    return 1;
+}
+
 /* A node at material point p in tet t (barycentric b): the simplex of the nodes with weight
  * above ENTRY_ON is split at p (an edge, a face or the tet), or, if p is at a node, that node.
  * Returns the node, or -1. */
@@ -141,7 +210,10 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
     }
     int base = s->count;
     /* 1. The entry node: the nearest surface node of the tet snapped onto the point if it is
-     *    close, else a new node where the point lies (a surface face or edge split). */
+     *    close and its surface is flat there, else a new node where the point lies (a surface
+     *    face or edge split). */
+    double fn[3];
+    int have_fn = surface_normal_at(m, t, b, fn);
     int entry = -1, near = -1;
     double nd = INFINITY;
     for (int j = 0; j < 4; j++) {
@@ -152,19 +224,21 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
             near = n;
         }
     }
-    if (near >= 0 && nd <= ENTRY_SNAP * shortest_edge(m, near)) {
-        double su[3], sx[3], sv[3], sa[3], q0 = star_quality(m, near);
+    /* The snap's saved state, put back if the entry fails later. */
+    double su[3], sx[3], sv[3], sa[3], u0[3];
+    int snapped = 0, recorded_before = near >= 0 && ns_remesh_original(s, near, u0);
+    if (near >= 0 && nd <= ENTRY_SNAP * shortest_edge(m, near) && have_fn &&
+        flat_around(m, near, fn)) {
+        double q0 = star_quality(m, near);
         memcpy(su, m->u + 3 * near, sizeof su);
         memcpy(sx, m->x + 3 * near, sizeof sx);
         memcpy(sv, m->v + 3 * near, sizeof sv);
         memcpy(sa, m->a + 3 * near, sizeof sa);
         if (nd == 0.0 || (ns_remesh_snap(m, s, near, a) == 0 && star_ok(m, near, q0))) {
             entry = near;
-        } else { /* put it back (a recorded original stays recorded: it is where it is) */
-            memcpy(m->u + 3 * near, su, sizeof su);
-            memcpy(m->x + 3 * near, sx, sizeof sx);
-            memcpy(m->v + 3 * near, sv, sizeof sv);
-            memcpy(m->a + 3 * near, sa, sizeof sa);
+            snapped = nd > 0.0;
+        } else {
+            put_back(m, s, near, su, sx, sv, sa, recorded_before);
         }
     }
     if (entry < 0)
@@ -173,6 +247,7 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
         ns_set_err(err, err_sz, "the surface could not be split at the entry point");
         return -1;
     }
+    /* From here a failure undoes the splits and the snap: the mesh is left as it was. */
     /* 2. The tip node, depth along the direction: the simplex containing it split there. If
      *    that point lies beyond the entry node's tets (its new node would not be joined to the
      *    entry node), the depth is halved, down to a thousandth of the one asked for. */
@@ -192,6 +267,8 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
         while (s->count > base) /* the splits made here, the tip's first */
             if (ns_remesh_undo(m, s))
                 break;
+        if (snapped)
+            put_back(m, s, entry, su, sx, sv, sa, recorded_before);
         ns_set_err(err, err_sz,
                    "no tip node could be made inside the entry point, joined to it by an edge");
         return -1;

@@ -385,11 +385,13 @@ static int tissue_follows_remeshing(void)
 }
 
 /* Skin entry (sim/remesh_entry.c) on the block's z = 0 face along +z: at a grid node (the node
- * itself) and at two points between nodes (on this grid every surface point lies within 0.75 of
- * a node's shortest edge, so a node is snapped there; the face or edge split is the fallback):
- * the entry node on the surface at the point, the tip node inside and joined to it, the mesh valid with no tet inverted; undoing
- * the stack and releasing its records gives the original mesh back exactly. Off the surface,
- * or pointing out of the tissue, is an error that changes nothing. */
+ * itself), at two points between nodes (on this grid every surface point lies within 0.75 of a
+ * node's shortest edge, so a node is snapped there), and at the second point again with the
+ * face's nodes fixed (they may not move: the surface face or edge is split, a second split):
+ * the entry node on the surface at the point, the tip node inside and joined to it, the mesh
+ * valid with no tet inverted; undoing the stack and releasing its records gives the original
+ * mesh back exactly. Off the surface, or pointing out of the tissue (which the check finds as
+ * tissue behind the point), is an error that changes nothing. */
 static int skin_entry_and_undo(void)
 {
     NsMesh m, orig;
@@ -399,14 +401,19 @@ static int skin_entry_and_undo(void)
         {2 * H, 2 * H, 0.0}, {2.1 * H, 1.95 * H, 0.0}, {1.5 * H, 2.5 * H, 0.0}};
     const double in[3] = {0.0, 0.0, 1.0}, out[3] = {0.0, 0.0, -1.0};
     char err[256];
-    for (int k = 0; k < 3; k++) {
+    for (int k = 0; k < 4; k++) {
         NsRemeshStack s;
         ns_remesh_stack_init(&s);
         int nodes[2];
-        ENSURE(ns_remesh_skin_entry(&m, &s, pts[k], in, 0.1 * H, nodes, err, sizeof err) == 0);
+        for (int i = 0; k == 3 && i < m.node_slots; i++)
+            if (m.u[3 * i + 2] == 0.0)
+                m.flags[i] |= NS_NODE_FIXED;
+        const double *p = pts[k < 3 ? k : 1];
+        ENSURE(ns_remesh_skin_entry(&m, &s, p, in, 0.1 * H, nodes, err, sizeof err) == 0);
+        ENSURE(s.count == (k == 3 ? 2 : 1)); /* the tip's split, and the surface's at k = 3 */
         const double *e = m.u + 3 * nodes[0], *t = m.u + 3 * nodes[1];
         for (int c = 0; c < 3; c++)
-            ENSURE(fabs(e[c] - pts[k][c]) < 1e-15);
+            ENSURE(fabs(e[c] - p[c]) < 1e-15);
         ENSURE(fabs(t[0] - e[0]) < 1e-15 && fabs(t[1] - e[1]) < 1e-15);
         ENSURE(t[2] > 0.0 && t[2] <= 0.1 * H + 1e-15);
         ENSURE(ns_mesh_validate(&m, err, sizeof err) == 0);
@@ -418,14 +425,16 @@ static int skin_entry_and_undo(void)
             }
         int chain[2] = {nodes[1], nodes[0]};
         ENSURE(structure_ok(&m, chain, 2));
-        printf("  entry %d: %d splits, entry node %s\n", k, s.count,
-               nodes[0] < orig.node_slots ? "an existing surface node" : "a new node");
+        printf("  entry %d: %d split(s)\n", k, s.count);
         while (s.count > 0)
             ENSURE(ns_remesh_undo(&m, &s) == 0);
         ns_remesh_release_all(&m, &s);
         double back;
         ENSURE(restored(&m, &orig, &back) == 0 && back == 0.0);
         ns_remesh_stack_free(&s);
+        for (int i = 0; k == 3 && i < m.node_slots; i++)
+            if (m.u[3 * i + 2] == 0.0)
+                m.flags[i] &= (uint8_t)~NS_NODE_FIXED;
     }
     uint64_t h0 = ns_mesh_topology_hash(&m);
     NsRemeshStack s;
@@ -436,7 +445,9 @@ static int skin_entry_and_undo(void)
     printf("  off the surface: %s\n", err);
     ENSURE(ns_remesh_skin_entry(&m, &s, pts[1], out, 0.1 * H, nodes, err, sizeof err) != 0);
     printf("  pointing out: %s\n", err);
+    double back;
     ENSURE(s.count == 0 && ns_mesh_topology_hash(&m) == h0);
+    ENSURE(restored(&m, &orig, &back) == 0 && back == 0.0);
     ns_remesh_stack_free(&s);
     ns_mesh_free(&m);
     ns_mesh_free(&orig);

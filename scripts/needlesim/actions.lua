@@ -106,6 +106,9 @@ local function goal(t, name)
     end
     if t.to == nil then
         local depth = t.depth
+        if depth == nil then -- act.retract all the way out: no goal
+            return nil
+        end
         return function() return depth - sim.depth end
     end
     local to = t.to
@@ -207,8 +210,10 @@ end
 --- act.aim{to, rate, within}: turn the needle's base at `rate` [rad/s] (default pi), the
 -- insertion paused, until the bevel faces the target named `to` across the needle, within
 -- `within` [rad] (default 0.2): a bevel-tip needle pushed in next cuts towards it. The tip's
--- bevel lags the base through the needle's torsion, so the base turns in small steps, each
--- checked against the bevel's direction. Nothing turns if the target is within 0.1 mm of the
+-- bevel lags the base through the needle's torsion, so the base turns in steps of at most
+-- 0.1 rad (a positive turn of the base turns the bevel positively about the tip's direction),
+-- each checked against the bevel's direction; if the bevel is not aimed after 200 steps the
+-- action fails at the script's line. Nothing turns if the target is within 0.1 mm of the
 -- needle's line.
 function act.aim(t)
     running()
@@ -219,18 +224,15 @@ function act.aim(t)
     local rate = number(t, "aim", "rate", GT0, "> 0 [rad/s]", math.pi)
     local within = number(t, "aim", "within", GT0, "> 0 [rad]", 0.2)
     local phi, off = bevel_offset(t.to)
-    local way = 1 -- flipped if turning the base one way turns the bevel the other
-    for _ = 1, 200 do
-        if off < 1e-4 or math.abs(phi) <= within then
-            break
+    local steps = 0
+    while off >= 1e-4 and math.abs(phi) > within do
+        if steps == 200 then
+            error(fmt("act.aim: the bevel is still %.0f deg off the target '%s' after 200 turns",
+                math.deg(math.abs(phi)), t.to), 2)
         end
-        local before = math.abs(phi)
-        act.twist { angle = way * (phi < 0 and -1 or 1) * math.min(math.abs(phi), 0.1),
-            rate = rate }
+        act.twist { angle = (phi < 0 and -1 or 1) * math.min(math.abs(phi), 0.1), rate = rate }
         phi, off = bevel_offset(t.to)
-        if math.abs(phi) > before + 1e-3 then
-            way = -way
-        end
+        steps = steps + 1
     end
     stop()
 end
