@@ -204,7 +204,8 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
                    "it, against the direction)");
         return -1;
     }
-    if (ns_mesh_locate(m, ahead, t, 0.0, NULL) < 0) {
+    /* (ahead with a little tolerance: on a lattice line it lies on tets' faces and edges) */
+    if (ns_mesh_locate(m, ahead, t, ENTRY_ON, NULL) < 0) {
         ns_set_err(err, err_sz, "the direction does not point into the tissue at the entry point");
         return -1;
     }
