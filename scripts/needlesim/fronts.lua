@@ -5,16 +5,18 @@
 return {
     brachytherapy = {
         { label = "dt=0.02 lazy=0.05 tol=1e-06", dt = 0.02, refine = 1.0, tolerance = 1e-06, lazy_threshold = 0.05,
-          tip_error = 0.00043187, cost = 2545.1 },
-        { label = "tol=0.0001", dt = 0.01, refine = 1.0, tolerance = 0.0001, lazy_threshold = 0.01,
-          tip_error = 0.0003378, cost = 4513.76 },
+          tip_error = 0.000396166, cost = 2038.58 },
+        { label = "dt=0.02", dt = 0.02, refine = 1.0, tolerance = 1e-08, lazy_threshold = 0.01,
+          tip_error = 0.000370151, cost = 2542.1 },
+        { label = "lazy=0.05", dt = 0.01, refine = 1.0, tolerance = 1e-08, lazy_threshold = 0.05,
+          tip_error = 0.000266589, cost = 3713.18 },
         { label = "dt=0.005", dt = 0.005, refine = 1.0, tolerance = 1e-08, lazy_threshold = 0.01,
-          tip_error = 3.51584e-05, cost = 10879.2 },
+          tip_error = 0.000259729, cost = 9644.62 },
     },
     phantom = {
         { label = "dt=0.02 lazy=0.05 tol=0.0001", dt = 0.02, refine = 1.0, tolerance = 0.0001, lazy_threshold = 0.05,
-          tip_error = 0.00353664, cost = 325.27 },
-        { label = "dt=0.02 tol=1e-06", dt = 0.02, refine = 1.0, tolerance = 1e-06, lazy_threshold = 0.01,
-          tip_error = 0.00349243, cost = 349.006 },
+          tip_error = 0.00697294, cost = 257.644 },
+        { label = "dt=0.005", dt = 0.005, refine = 1.0, tolerance = 1e-08, lazy_threshold = 0.01,
+          tip_error = 0.0045675, cost = 1099.11 },
     },
 }
