@@ -118,8 +118,7 @@ static double tet_quality_of(const NsMesh *m, const int *tn)
     return ns_tet_quality(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2], m->u + 3 * tn[3]);
 }
 
-/* Worst material quality of the tets around node n. */
-static double node_min_quality(const NsMesh *m, int n)
+double ns_remesh_node_quality(const NsMesh *m, int n)
 {
     double q = INFINITY;
     const NsIntList *l = &m->node_tets[n];
@@ -128,8 +127,7 @@ static double node_min_quality(const NsMesh *m, int n)
     return q;
 }
 
-/* Is node n on the boundary (on a face with no tet across)? */
-static int node_on_boundary(const NsMesh *m, int n)
+int ns_remesh_node_on_boundary(const NsMesh *m, int n)
 {
     const NsIntList *l = &m->node_tets[n];
     for (int i = 0; i < l->count; i++) {
@@ -141,8 +139,7 @@ static int node_on_boundary(const NsMesh *m, int n)
     return 0;
 }
 
-/* Are nodes a and b joined by an edge (in a common tet)? */
-static int connected(const NsMesh *m, int a, int b)
+int ns_remesh_joined(const NsMesh *m, int a, int b)
 {
     if (a == b)
         return 1;
@@ -455,7 +452,7 @@ static void reposition(NsMesh *m, int n, int pn, int b)
     for (int i = 1; i < 16; i++) {
         double sv = i / 16.0;
         AT(sv);
-        double q = node_min_quality(m, n);
+        double q = ns_remesh_node_quality(m, n);
         if (q > best_q) {
             best_q = q;
             best_s = sv;
@@ -466,9 +463,9 @@ static void reposition(NsMesh *m, int n, int pn, int b)
     for (int it = 0; it < 12; it++) {
         double s1 = hi - g * (hi - lo), s2 = lo + g * (hi - lo);
         AT(s1);
-        double q1 = node_min_quality(m, n);
+        double q1 = ns_remesh_node_quality(m, n);
         AT(s2);
-        double q2 = node_min_quality(m, n);
+        double q2 = ns_remesh_node_quality(m, n);
         if (q1 > best_q) {
             best_q = q1;
             best_s = s1;
@@ -496,7 +493,7 @@ static void place_free(NsMesh *m, const NsRemeshStack *s, int n, int allow_bound
 {
     const NsIntList *l = &m->node_tets[n];
     if (l->count == 0 || (m->flags[n] & NS_NODE_FIXED) ||
-        (!allow_boundary && node_on_boundary(m, n)))
+        (!allow_boundary && ns_remesh_node_on_boundary(m, n)))
         return;
     double *un = m->u + 3 * n, u_old[3], p[3], h = 0.0;
     memcpy(u_old, un, sizeof u_old);
@@ -513,11 +510,11 @@ static void place_free(NsMesh *m, const NsRemeshStack *s, int n, int allow_bound
             }
         }
     h = 0.25 * h / ne; /* a quarter of the mean length of the node's edges */
-    double best = node_min_quality(m, n), u0[3];
+    double best = ns_remesh_node_quality(m, n), u0[3];
     memcpy(p, un, sizeof p);
     if (ns_remesh_original(s, n, u0)) {
         memcpy(un, u0, sizeof u0);
-        double q = node_min_quality(m, n);
+        double q = ns_remesh_node_quality(m, n);
         if (q > best) {
             best = q;
             memcpy(p, u0, sizeof p);
@@ -529,7 +526,7 @@ static void place_free(NsMesh *m, const NsRemeshStack *s, int n, int allow_bound
         for (int d = 0; d < 6 && !improved; d++) {
             memcpy(un, p, sizeof p);
             un[d / 2] += d % 2 ? -h : h;
-            double q = node_min_quality(m, n);
+            double q = ns_remesh_node_quality(m, n);
             if (q > best) {
                 best = q;
                 memcpy(p, un, sizeof p);
@@ -653,7 +650,7 @@ static int apply(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Cand
      * is fixed or on the boundary (moving it would change the boundary; skin entry allows). */
     if (c->move >= 0 && ns_mesh_node_alive(m, c->move) && ns_mesh_node_alive(m, c->seg_b) &&
         !(m->flags[c->move] & NS_NODE_FIXED) && c->move != placed &&
-        (tip->allow_boundary || !node_on_boundary(m, c->move))) {
+        (tip->allow_boundary || !ns_remesh_node_on_boundary(m, c->move))) {
         node_save(m, c->move, &ap->moved);
         reposition(m, c->move, placed, c->seg_b);
     }
@@ -861,14 +858,14 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
         int ok = 1;
         /* Connectivity of the needle's chain. */
         if (c->undo || c->release)
-            ok = connected(m, ap.placed, u2);
+            ok = ns_remesh_joined(m, ap.placed, u2);
         else if (c->kind != NS_REMESH_SNAP || c->simplex[0] != u1)
-            ok = connected(m, ap.placed, u1);
+            ok = ns_remesh_joined(m, ap.placed, u1);
         /* The boundary: a placed or moved boundary node changes it. */
         if (ok && !tip->allow_boundary) {
-            if (node_on_boundary(m, ap.placed))
+            if (ns_remesh_node_on_boundary(m, ap.placed))
                 ok = 0;
-            if (ap.moved.n >= 0 && node_on_boundary(m, ap.moved.n))
+            if (ap.moved.n >= 0 && ns_remesh_node_on_boundary(m, ap.moved.n))
                 ok = 0;
         }
         int nq = 0;

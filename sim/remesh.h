@@ -92,6 +92,13 @@ int ns_remesh_record_original(NsRemeshStack *s, int n, const double u[3]);
  * there, as for a snap) and forgets the records: the needle has left the tissue. */
 void ns_remesh_release_all(NsMesh *m, NsRemeshStack *s);
 
+/* Worst material quality of the tets around node n (INFINITY with none). */
+double ns_remesh_node_quality(const NsMesh *m, int n);
+/* Is node n on the boundary (on a face of one of its tets with no tet across)? */
+int ns_remesh_node_on_boundary(const NsMesh *m, int n);
+/* Are nodes a and b joined by an edge (in a common tet; a node is joined to itself)? */
+int ns_remesh_joined(const NsMesh *m, int a, int b);
+
 /* Forgets node n's recorded original position (if any). */
 void ns_remesh_forget_original(NsRemeshStack *s, int n);
 

@@ -22,26 +22,6 @@
 /* A snap may not bring an incident tet's quality below this (unless it was lower already). */
 #define ENTRY_MIN_QUALITY 0.05
 
-static int on_boundary(const NsMesh *m, int n)
-{
-    const NsIntList *l = &m->node_tets[n];
-    for (int i = 0; i < l->count; i++)
-        for (int k = 0; k < 4; k++)
-            if (m->tet_adj[4 * l->items[i] + k] < 0 && m->tet_node[4 * l->items[i] + k] != n)
-                return 1;
-    return 0;
-}
-
-static int joined(const NsMesh *m, int a, int b)
-{
-    const NsIntList *l = &m->node_tets[a];
-    for (int i = 0; i < l->count; i++)
-        for (int k = 0; k < 4; k++)
-            if (m->tet_node[4 * l->items[i] + k] == b)
-                return 1;
-    return 0;
-}
-
 /* Unit outward normal of face f (opposite node f) of tet t in material space; 0 if degenerate. */
 static int face_normal(const NsMesh *m, int t, int f, double n[3])
 {
@@ -108,18 +88,6 @@ static int star_ok(const NsMesh *m, int n, double q_before)
             return 0;
     }
     return 1;
-}
-
-static double star_quality(const NsMesh *m, int n)
-{
-    double q = INFINITY;
-    const NsIntList *l = &m->node_tets[n];
-    for (int i = 0; i < l->count; i++) {
-        const int *tn = m->tet_node + 4 * l->items[i];
-        q = fmin(q, ns_tet_quality(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2],
-                                   m->u + 3 * tn[3]));
-    }
-    return q;
 }
 
 /* Puts node n's saved state back after a snap that is not kept, and drops the original
@@ -220,7 +188,7 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
     for (int j = 0; j < 4; j++) {
         int n = m->tet_node[4 * t + j];
         double e = dist(m->u + 3 * n, a);
-        if (e < nd && on_boundary(m, n) && !(m->flags[n] & NS_NODE_FIXED)) {
+        if (e < nd && ns_remesh_node_on_boundary(m, n) && !(m->flags[n] & NS_NODE_FIXED)) {
             nd = e;
             near = n;
         }
@@ -230,7 +198,7 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
     int snapped = 0, recorded_before = near >= 0 && ns_remesh_original(s, near, u0);
     if (near >= 0 && nd <= ENTRY_SNAP * shortest_edge(m, near) && have_fn &&
         flat_around(m, near, fn)) {
-        double q0 = star_quality(m, near);
+        double q0 = ns_remesh_node_quality(m, near);
         memcpy(su, m->u + 3 * near, sizeof su);
         memcpy(sx, m->x + 3 * near, sizeof sx);
         memcpy(sv, m->v + 3 * near, sizeof sv);
@@ -264,7 +232,7 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
         if (inside)
             tip = node_at(m, s, tt, b, p);
     }
-    if (tip < 0 || tip == entry || !joined(m, entry, tip)) {
+    if (tip < 0 || tip == entry || !ns_remesh_joined(m, entry, tip)) {
         while (s->count > base) /* the splits made here, the tip's first */
             if (ns_remesh_undo(m, s))
                 break;

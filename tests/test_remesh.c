@@ -126,19 +126,6 @@ static int structure_ok(const NsMesh *m, const int *chain, int n)
     return q.inverted == 0;
 }
 
-/* Worst material quality of the tets around node n. */
-static double node_quality(const NsMesh *m, int n)
-{
-    double q = INFINITY;
-    const NsIntList *l = &m->node_tets[n];
-    for (int i = 0; i < l->count; i++) {
-        const int *tn = m->tet_node + 4 * l->items[i];
-        q = fmin(q, ns_tet_quality(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2],
-                                   m->u + 3 * tn[3]));
-    }
-    return q;
-}
-
 /* Drives the tip from the middle of the x = 0 face along dir into the block, `steps` steps of
  * `step` m, then back out, with the structural checks after every step. Counts the operations
  * into kinds; the worst region quality into *qmin; the worst and largest dihedral angle of the
@@ -179,10 +166,10 @@ static int drive(NsMesh *m, const double dir3[3], int steps, double step, int ki
             double u0[3];
             if (dir < 0 && r.dropped && !r.undone && old_u1 != r.tip &&
                 ns_remesh_original(&s, old_u1, u0)) {
-                double q_now = node_quality(m, old_u1), keep[3];
+                double q_now = ns_remesh_node_quality(m, old_u1), keep[3];
                 memcpy(keep, m->u + 3 * old_u1, sizeof keep);
                 memcpy(m->u + 3 * old_u1, u0, sizeof u0);
-                double q_orig = node_quality(m, old_u1);
+                double q_orig = ns_remesh_node_quality(m, old_u1);
                 memcpy(m->u + 3 * old_u1, keep, sizeof keep);
                 ENSURE(q_now >= q_orig);
                 (*released)++;
