@@ -564,7 +564,9 @@ static int project(const CoupledSchur *w, const CoupledSystem *S, const double *
                    double *v, double *h, double *tmp)
 {
     int nt3 = S->nt3;
-    if (ns_solver_apply(w->fac, nt3, 1, r, g))
+    /* F^-1 with the factor's single-precision copy: a preconditioner needs no more; C and the
+     * cached columns below stay double, so every iterate still meets the constraints. */
+    if (ns_solver_precondition(w->fac, nt3, r, g))
         return -1;
     memset(g + nt3, 0, (size_t)S->nr3 * sizeof *g);
     if (ns_banded_solve(S->Ar, S->rfixed, r + nt3, g + nt3, NULL))

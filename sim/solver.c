@@ -14,6 +14,7 @@
 #include "solver.h"
 
 #include "ns_config.h"
+#include "supernodal.h"
 
 #include <math.h>
 #include <pthread.h>
@@ -56,6 +57,7 @@ typedef struct RefreshJob {
     cholmod_factor *symbolic; /* the solver's Lsym, read-only while the job exists */
     cholmod_factor *L; /* in: a numeric factor to overwrite, or NULL; out: the factor, or NULL
                           if the factorization failed */
+    NsSuperFactor *sf; /* out: L's single-precision copy (NULL: none, CHOLMOD's solve is used) */
     /* ns_solver_factor_async's columns: Z = A^-1 B with the new factor (ncols of n3 each, dof
      * the free numbering of that matrix, the job's own copy); cols_ok is set when they were. */
     int ncols, n3, cols_ok;
@@ -73,8 +75,12 @@ struct NsSolver {
     long solves; /* solve calls so far; the clock of refreshes */
     cholmod_common cm;
     int cm_started;
-    cholmod_factor *Lsym;  /* symbolic analysis (ordering, supernodes) for `pattern` */
-    cholmod_factor *L;     /* numeric factor in use (possibly stale), NULL if none */
+    cholmod_factor *Lsym; /* symbolic analysis (ordering, supernodes) for `pattern` */
+    cholmod_factor *L;    /* numeric factor in use (possibly stale), NULL if none */
+    NsSuperFactor *sf;    /* L's single-precision copy for preconditioning (supernodal.h), or
+                             NULL (then CHOLMOD's solve preconditions) */
+    double *pbuf;         /* (nfree) its right-hand side */
+    int pbuf_cap;
     cholmod_factor *spare; /* a numeric factor of the same analysis no longer in use: the next
                               factorization overwrites it rather than allocating (~10 ms of page
                               faults for the box's 24 MB factor) */
@@ -203,11 +209,22 @@ static void job_cancel(NsSolver *s)
         cholmod_free_sparse(&j->M, &j->cm);
     if (j->L)
         cholmod_free_factor(&j->L, &j->cm);
+    ns_super_free(j->sf);
+    j->sf = NULL;
     j->pending = 0;
+}
+
+/* Makes s->sf the single-precision copy of s->L (none if there is no L or no memory). */
+static void make_super(NsSolver *s)
+{
+    ns_super_free(s->sf);
+    s->sf = s->L ? ns_super_from_cholmod(s->L) : NULL;
 }
 
 static void free_factors(NsSolver *s)
 {
+    ns_super_free(s->sf);
+    s->sf = NULL;
     if (s->L)
         cholmod_free_factor(&s->L, &s->cm);
     if (s->spare)
@@ -231,6 +248,8 @@ void ns_solver_destroy(NsSolver *s)
         cholmod_free_dense(&s->E, &s->cm);
         cholmod_finish(&s->cm);
     }
+    ns_super_free(s->sf);
+    free(s->pbuf);
     free(s->dof);
     free(s->job.dof);
     free(s->work);
@@ -265,6 +284,7 @@ void ns_solver_refresh(NsSolver *s)
     else if (s->L)
         cholmod_free_factor(&s->L, &s->cm);
     s->L = NULL;
+    make_super(s);
 }
 
 static int ensure(void **p, int *cap, int need, size_t elem)
@@ -385,8 +405,10 @@ static int factor_sync(NsSolver *s, const NsBlockMatrix *A, int nfree, uint64_t 
     if (rc) {
         if (s->L)
             cholmod_free_factor(&s->L, &s->cm);
+        make_super(s);
         return -1;
     }
+    make_super(s);
     s->factor_solve = s->solves;
     s->factors++;
     return 0;
@@ -429,6 +451,7 @@ static void *job_main(void *arg)
         cholmod_free_factor(&L, &j->cm);
     cholmod_free_sparse(&j->M, &j->cm);
     j->L = L;
+    j->sf = L ? ns_super_from_cholmod(L) : NULL;
     j->cols_ok = 0;
     if (L && j->ncols > 0)
         j->cols_ok = solve_columns(L, &j->cm, j->dof, j->n3, (int)L->n, j->ncols, j->B, j->Z) == 0;
@@ -488,6 +511,9 @@ static void job_adopt(NsSolver *s, uint64_t h, int nfree, NsSolveStats *st)
         s->spare = s->L;
         s->L = j->L;
         j->L = NULL;
+        ns_super_free(s->sf);
+        s->sf = j->sf;
+        j->sf = NULL;
         s->factor_solve = j->made_at;
         s->factors++;
         st->refresh_adopted = 1;
@@ -525,6 +551,24 @@ static int apply_factor(NsSolver *s, int n3, const double *r, double *z)
     const double *xx = s->X->x;
     for (int i = 0; i < n3; i++)
         z[i] = s->dof[i] >= 0 ? xx[s->dof[i]] : 0.0;
+    return 0;
+}
+
+/* z ~ A^-1 r on the free DOFs for preconditioning: with the factor's single-precision copy
+ * (supernodal.h) on this solve's loop threads, else with CHOLMOD's solve. */
+static int precondition(NsSolver *s, int n3, const double *r, double *z)
+{
+    if (!s->sf || ns_super_n(s->sf) != s->nfree)
+        return apply_factor(s, n3, r, z);
+    if (ensure((void **)&s->pbuf, &s->pbuf_cap, s->nfree, sizeof(double)))
+        return -1;
+    double *w = s->pbuf;
+    for (int i = 0; i < n3; i++)
+        if (s->dof[i] >= 0)
+            w[s->dof[i]] = r[i];
+    ns_super_solve(s->sf, w, w, loop_threads(s));
+    for (int i = 0; i < n3; i++)
+        z[i] = s->dof[i] >= 0 ? w[s->dof[i]] : 0.0;
     return 0;
 }
 
@@ -723,7 +767,7 @@ restart:;
     while (rnorm > tol * bnorm && it < max_iter) {
         double rz_new;
         if (s->kind == NS_SOLVER_STALE_PCG) {
-            if (apply_factor(s, n3, r, z)) {
+            if (precondition(s, n3, r, z)) {
                 if (stats)
                     *stats = st;
                 return -1;
@@ -793,6 +837,13 @@ int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z)
     if (ncols == 1) /* one column: the solve's kept buffers */
         return apply_factor(s, n3, B, Z);
     return solve_columns(s->L, &s->cm, s->dof, n3, s->nfree, ncols, B, Z);
+}
+
+int ns_solver_precondition(NsSolver *s, int n3, const double *r, double *z)
+{
+    if (!s || !s->L || n3 != s->n3)
+        return -1;
+    return precondition(s, n3, r, z);
 }
 
 long ns_solver_factor_count(const NsSolver *s)

@@ -682,23 +682,47 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
     }
 }
 
-/* A = M - c1 K - c2 D on K's pattern (D shares it: both are scattered at the same pairs). */
+/* Row i of A = M - c1 K - c2 D on K's pattern (D shares it: both are scattered at the same
+ * pairs). The three rows are sorted by column, so one walk finds the blocks; a block missing in
+ * A is inserted (only row i's arrays change, so rows can be built on any thread). */
+static void build_row(NsTissue *t, int i, double c1, double c2)
+{
+    const NsBlockRow *kr = &t->K.rows[i], *dr = &t->D.rows[i];
+    NsBlockRow *ar = &t->A.rows[i];
+    int pd = 0, pa = 0;
+    for (int p = 0; p < kr->count; p++) {
+        int j = kr->col[p];
+        const double *kb = kr->val + 9 * p;
+        while (pd < dr->count && dr->col[pd] < j)
+            pd++;
+        const double *db = pd < dr->count && dr->col[pd] == j ? dr->val + 9 * pd : NULL;
+        while (pa < ar->count && ar->col[pa] < j)
+            pa++;
+        double *ab =
+            pa < ar->count && ar->col[pa] == j ? ar->val + 9 * pa : ns_bsm_get(&t->A, i, j);
+        for (int q = 0; q < 9; q++)
+            ab[q] = -c1 * kb[q] - c2 * (db ? db[q] : 0.0);
+    }
+    double *d = ns_bsm_get(&t->A, i, i);
+    for (int c = 0; c < 3; c++)
+        d[4 * c] += t->mass[i] > 0.0 ? t->mass[i] : 1.0; /* unused slots: identity */
+}
+
 static void build_system(NsTissue *t, double c1, double c2)
 {
-    for (int i = 0; i < t->K.n; i++) {
-        const NsBlockRow *kr = &t->K.rows[i];
-        for (int p = 0; p < kr->count; p++) {
-            int j = kr->col[p];
-            const double *kb = kr->val + 9 * p;
-            const double *db = ns_bsm_find(&t->D, i, j);
-            double *ab = ns_bsm_get(&t->A, i, j);
-            for (int q = 0; q < 9; q++)
-                ab[q] = -c1 * kb[q] - c2 * (db ? db[q] : 0.0);
-        }
-        double *d = ns_bsm_get(&t->A, i, i);
-        for (int c = 0; c < 3; c++)
-            d[4 * c] += t->mass[i] > 0.0 ? t->mass[i] : 1.0; /* unused slots: identity */
+    int threads = t->params.threads > 1 ? t->params.threads : 1;
+#if NS_HAVE_OPENMP
+    if (threads > 1 && t->K.n >= NS_BSM_PARALLEL_MIN_ROWS) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+        for (int i = 0; i < t->K.n; i++)
+            build_row(t, i, c1, c2);
+        return;
     }
+#else
+    (void)threads;
+#endif
+    for (int i = 0; i < t->K.n; i++)
+        build_row(t, i, c1, c2);
 }
 
 double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissueStats *st)
@@ -719,8 +743,10 @@ double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissue
         y[i] = dt * M->v[i] + dt * dt * (0.5 - beta) * M->a[i];
         z[i] = dt * (1.0 - gamma) * M->a[i];
     }
-    ns_bsm_mul(&t->K, y, rhs);
-    ns_bsm_mul(&t->D, z, y);
+    /* Row-parallel products: each row summed whole by one thread, the same bits for any count. */
+    int threads = t->params.threads > 1 ? t->params.threads : 1;
+    ns_bsm_mul_threads(&t->K, y, rhs, threads);
+    ns_bsm_mul_threads(&t->D, z, y, threads);
     for (int i = 0; i < n3; i++)
         rhs[i] += y[i] + t->force[i] + (ext ? ext[i] : 0.0);
     return rhs;

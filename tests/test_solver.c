@@ -460,9 +460,66 @@ static int factor_applied_to_columns(void)
     return 0;
 }
 
+/* The factor's single-precision copy (sim/supernodal.c): close to the double solve, not the
+ * same operator (so it is in use), bit-identical on one thread and two, b and z distinct. */
+static int single_precision_preconditioner(void)
+{
+    const int m = 12, n = m * m * m, n3 = 3 * n;
+    NsBlockMatrix A;
+    grid_matrix(&A, m, 1e3, 1.0);
+    uint8_t *fixed = calloc((size_t)n3, 1);
+    for (int i = 0; i < 3 * m * m; i++)
+        fixed[i] = 1;
+    double *b = malloc((size_t)n3 * sizeof *b), *z = malloc((size_t)n3 * sizeof *z);
+    double *z1 = malloc((size_t)n3 * sizeof *z1), *z2 = malloc((size_t)n3 * sizeof *z2);
+    for (int i = 0; i < n3; i++)
+        b[i] = cos(0.37 * i) + 0.1;
+    NsSolver *s = ns_solver_create(NS_SOLVER_DIRECT);
+    ENSURE(ns_solver_precondition(s, n3, b, z1) == -1); /* no factor yet */
+    ENSURE(ns_solver_factor(s, &A, fixed) == 0);
+    ENSURE(ns_solver_precondition(s, n3 - 3, b, z1) == -1); /* not the factored size */
+    ENSURE(ns_solver_apply(s, n3, 1, b, z) == 0);
+    ns_solver_set_threads(s, 1);
+    ENSURE(ns_solver_precondition(s, n3, b, z1) == 0);
+    ns_solver_set_threads(s, 2);
+    ENSURE(ns_solver_precondition(s, n3, b, z2) == 0);
+    ENSURE(memcmp(z1, z2, (size_t)n3 * sizeof *z1) == 0);
+    double err = 0.0, nrm = 0.0;
+    for (int i = 0; i < n3; i++) {
+        if (fixed[i])
+            ENSURE(z1[i] == 0.0);
+        err += (z1[i] - z[i]) * (z1[i] - z[i]);
+        nrm += z[i] * z[i];
+    }
+    err = sqrt(err / nrm);
+    ENSURE(err > 1e-12 && err < 1e-5); /* floats' rounding, not a double solve, not garbage */
+    /* A refactorization's copy replaces the old one: the new matrix's answer. */
+    NsBlockMatrix A2;
+    grid_matrix(&A2, m, 2e3, 1.0);
+    ENSURE(ns_solver_factor(s, &A2, fixed) == 0);
+    ENSURE(ns_solver_apply(s, n3, 1, b, z) == 0);
+    ENSURE(ns_solver_precondition(s, n3, b, z2) == 0);
+    err = nrm = 0.0;
+    for (int i = 0; i < n3; i++) {
+        err += (z2[i] - z[i]) * (z2[i] - z[i]);
+        nrm += z[i] * z[i];
+    }
+    ENSURE(sqrt(err / nrm) < 1e-5);
+    ns_solver_destroy(s);
+    ns_bsm_free(&A);
+    ns_bsm_free(&A2);
+    free(fixed);
+    free(b);
+    free(z);
+    free(z1);
+    free(z2);
+    return 0;
+}
+
 NS_TEST_MAIN({"all_kinds_agree", all_kinds_agree},
              {"stale_factor_preconditions_and_refreshes", stale_factor_preconditions_and_refreshes},
              {"threads_give_identical_iterates", threads_give_identical_iterates},
              {"background_refresh_adopted_on_schedule", background_refresh_adopted_on_schedule},
              {"fallbacks_drop_pending_refresh", fallbacks_drop_pending_refresh},
-             {"factor_applied_to_columns", factor_applied_to_columns})
+             {"factor_applied_to_columns", factor_applied_to_columns},
+             {"single_precision_preconditioner", single_precision_preconditioner})

@@ -1,0 +1,399 @@
+/* Single-precision supernodal triangular solves on two threads (supernodal.h). */
+#include "supernodal.h"
+
+#include "ns_config.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#if NS_HAVE_OPENMP
+#include <omp.h>
+#endif
+
+/* Owners of a supernode: bin 0, bin 1 (whole subtrees, run at once), or the top part. */
+#define TOP 2
+/* Most expansions of the top part tried when cutting the tree. */
+#define MAX_EXPAND 64
+
+struct NsSuperFactor {
+    int n, nsuper;
+    int *super;   /* (nsuper + 1) first column of each supernode */
+    int *pi;      /* (nsuper + 1) start of its row indices in rows */
+    size_t *px;   /* (nsuper + 1) start of its values in x (column-major, nr x nc) */
+    int *rows;    /* row indices, the supernode's own columns first */
+    int *perm;    /* (n) A(perm, perm) = L L^T */
+    float *x;     /* values */
+    int *list[3]; /* supernodes of each owner, ascending */
+    int count[3];
+    unsigned char *col_owner; /* (n) owner of the supernode of each column */
+    int *top_cols;            /* columns of the top part, ascending */
+    int ntop_cols;
+    /* Workspace: y (n), one accumulator (n) and one gather buffer (max_below) per bin. */
+    double *y, *acc[2], *tbuf[2];
+};
+
+void ns_super_free(NsSuperFactor *f)
+{
+    if (!f)
+        return;
+    free(f->super);
+    free(f->pi);
+    free(f->px);
+    free(f->rows);
+    free(f->perm);
+    free(f->x);
+    for (int b = 0; b < 3; b++)
+        free(f->list[b]);
+    free(f->col_owner);
+    free(f->top_cols);
+    free(f->y);
+    free(f->acc[0]);
+    free(f->acc[1]);
+    free(f->tbuf[0]);
+    free(f->tbuf[1]);
+    free(f);
+}
+
+int ns_super_n(const NsSuperFactor *f)
+{
+    return f ? f->n : 0;
+}
+
+/* Puts the subtrees of the frontier nodes (sub: subtree sizes) into two bins, largest first
+ * into the lighter one; bin[k] receives the frontier node k's bin. Returns the heavier bin's
+ * size. Ties go to bin 0, and equal sizes keep their order, so the cut is deterministic. */
+static double lpt(const int *front, int nf, const double *sub, int *order, unsigned char *bin)
+{
+    for (int k = 0; k < nf; k++)
+        order[k] = k;
+    for (int i = 1; i < nf; i++) { /* insertion sort by decreasing size; nf is small */
+        int v = order[i], j = i;
+        while (j > 0 && sub[front[order[j - 1]]] < sub[front[v]]) {
+            order[j] = order[j - 1];
+            j--;
+        }
+        order[j] = v;
+    }
+    double load[2] = {0.0, 0.0};
+    for (int i = 0; i < nf; i++) {
+        int b = load[1] < load[0];
+        bin[order[i]] = (unsigned char)b;
+        load[b] += sub[front[order[i]]];
+    }
+    return load[0] > load[1] ? load[0] : load[1];
+}
+
+/* Cuts the supernodal tree (parent, children lists head/next, subtree sizes sub, own sizes
+ * own): the top part grows from the roots by the largest frontier subtree at a time, and the
+ * cut that minimizes (heavier bin + top) is kept. Fills owner[s]. Returns 0 or -1. */
+static int cut_tree(NsSuperFactor *f, const int *head, const int *next, const int *first,
+                    const double *sub, const double *own, const int *parent, unsigned char *owner)
+{
+    int ns = f->nsuper;
+    int *front = malloc(((size_t)ns + 1) * sizeof *front);
+    int *order = malloc(((size_t)ns + 1) * sizeof *order);
+    unsigned char *bin = malloc((size_t)ns + 1);
+    if (!front || !order || !bin) {
+        free(front);
+        free(order);
+        free(bin);
+        return -1;
+    }
+    int best_k = 0;
+    double best = 0.0;
+    for (int pass = 0; pass < 2; pass++) {
+        /* Pass 0 finds the best number of expansions; pass 1 makes that cut. */
+        int nf = 0, stop = pass ? best_k : MAX_EXPAND;
+        double top = 0.0;
+        memset(owner, 0, (size_t)ns);
+        for (int s = 0; s < ns; s++)
+            if (parent[s] < 0)
+                front[nf++] = s;
+        for (int k = 0;; k++) {
+            double cost = lpt(front, nf, sub, order, bin) + top;
+            if (pass == 0 && (k == 0 || cost < best)) {
+                best = cost;
+                best_k = k;
+            }
+            if (k == stop)
+                break;
+            int big = 0; /* the largest frontier subtree (first of equals) */
+            for (int i = 1; i < nf; i++)
+                if (sub[front[i]] > sub[front[big]])
+                    big = i;
+            int s = nf > 0 ? front[big] : -1;
+            if (s < 0 || head[s] < 0)
+                break; /* a leaf cannot be split further */
+            owner[s] = TOP;
+            top += own[s];
+            front[big] = front[--nf];
+            for (int c = head[s]; c >= 0; c = next[c])
+                front[nf++] = c;
+        }
+        if (pass == 1) {
+            for (int i = 0; i < nf; i++)
+                for (int s = first[front[i]]; s <= front[i]; s++)
+                    owner[s] = bin[i];
+        }
+    }
+    free(front);
+    free(order);
+    free(bin);
+    return 0;
+}
+
+NsSuperFactor *ns_super_from_cholmod(const cholmod_factor *L)
+{
+    if (!L || !L->is_super || !L->is_ll || L->xtype != CHOLMOD_REAL || !L->x ||
+        L->itype != CHOLMOD_INT)
+        return NULL;
+    NsSuperFactor *f = calloc(1, sizeof *f);
+    if (!f)
+        return NULL;
+    int n = (int)L->n, ns = (int)L->nsuper;
+    const int *Ls = L->super, *Lpi = L->pi, *Lpx = L->px, *Lrows = L->s, *Lperm = L->Perm;
+    f->n = n;
+    f->nsuper = ns;
+    size_t nrows = (size_t)Lpi[ns], nx = (size_t)Lpx[ns];
+    f->super = malloc(((size_t)ns + 1) * sizeof *f->super);
+    f->pi = malloc(((size_t)ns + 1) * sizeof *f->pi);
+    f->px = malloc(((size_t)ns + 1) * sizeof *f->px);
+    f->rows = malloc((nrows + 1) * sizeof *f->rows);
+    f->perm = malloc(((size_t)n + 1) * sizeof *f->perm);
+    f->x = malloc((nx + 1) * sizeof *f->x);
+    f->col_owner = malloc((size_t)n + 1);
+    f->top_cols = malloc(((size_t)n + 1) * sizeof *f->top_cols);
+    f->y = malloc(((size_t)n + 1) * sizeof *f->y);
+    f->acc[0] = calloc((size_t)n + 1, sizeof *f->acc[0]);
+    f->acc[1] = calloc((size_t)n + 1, sizeof *f->acc[1]);
+    int *parent = malloc(((size_t)ns + 1) * sizeof *parent);
+    int *head = malloc(((size_t)ns + 1) * sizeof *head);
+    int *next = malloc(((size_t)ns + 1) * sizeof *next);
+    int *first = malloc(((size_t)ns + 1) * sizeof *first);
+    int *col_super = malloc(((size_t)n + 1) * sizeof *col_super);
+    double *sub = malloc(((size_t)ns + 1) * sizeof *sub);
+    double *own = malloc(((size_t)ns + 1) * sizeof *own);
+    unsigned char *owner = malloc((size_t)ns + 1);
+    int ok = f->super && f->pi && f->px && f->rows && f->perm && f->x && f->col_owner &&
+             f->top_cols && f->y && f->acc[0] && f->acc[1] && parent && head && next && first &&
+             col_super && sub && own && owner;
+    int max_below = 1;
+    if (ok) {
+        memcpy(f->super, Ls, ((size_t)ns + 1) * sizeof *f->super);
+        memcpy(f->pi, Lpi, ((size_t)ns + 1) * sizeof *f->pi);
+        for (int s = 0; s <= ns; s++)
+            f->px[s] = (size_t)Lpx[s];
+        memcpy(f->rows, Lrows, nrows * sizeof *f->rows);
+        if (Lperm)
+            memcpy(f->perm, Lperm, (size_t)n * sizeof *f->perm);
+        else
+            for (int k = 0; k < n; k++)
+                f->perm[k] = k;
+        const double *lx = L->x;
+        for (size_t i = 0; i < nx; i++)
+            f->x[i] = (float)lx[i];
+        /* The supernodal elimination tree: a supernode's parent holds its first row below its
+         * own columns. CHOLMOD numbers supernodes in postorder, so each subtree is the range
+         * [first[s], s] and children come before parents. */
+        for (int s = 0; s < ns; s++)
+            for (int k = Ls[s]; k < Ls[s + 1]; k++)
+                col_super[k] = s;
+        for (int s = 0; s < ns; s++) {
+            int nc = Ls[s + 1] - Ls[s], nr = Lpi[s + 1] - Lpi[s];
+            parent[s] = nr > nc ? col_super[Lrows[Lpi[s] + nc]] : -1;
+            if (parent[s] >= 0 && parent[s] <= s)
+                ok = 0; /* not postordered: the subtree ranges would be wrong */
+            if (nr - nc > max_below)
+                max_below = nr - nc;
+            own[s] = (double)(Lpx[s + 1] - Lpx[s]);
+            sub[s] = own[s];
+            first[s] = s;
+            head[s] = -1;
+        }
+    }
+    if (ok) {
+        for (int s = 0; s < ns; s++) {
+            int p = parent[s];
+            if (p >= 0) {
+                sub[p] += sub[s];
+                if (first[s] < first[p])
+                    first[p] = first[s];
+            }
+        }
+        for (int s = ns - 1; s >= 0; s--) /* children lists, ascending */
+            if (parent[s] >= 0) {
+                next[s] = head[parent[s]];
+                head[parent[s]] = s;
+            }
+        ok = cut_tree(f, head, next, first, sub, own, parent, owner) == 0;
+    }
+    for (int b = 0; ok && b < 3; b++) {
+        f->list[b] = malloc(((size_t)ns + 1) * sizeof *f->list[b]);
+        ok = f->list[b] != NULL;
+    }
+    if (ok) {
+        for (int s = 0; s < ns; s++) {
+            f->list[owner[s]][f->count[owner[s]]++] = s;
+            for (int k = Ls[s]; k < Ls[s + 1]; k++)
+                f->col_owner[k] = owner[s];
+        }
+        for (int k = 0; k < n; k++)
+            if (f->col_owner[k] == TOP)
+                f->top_cols[f->ntop_cols++] = k;
+        f->tbuf[0] = malloc((size_t)max_below * sizeof *f->tbuf[0]);
+        f->tbuf[1] = malloc((size_t)max_below * sizeof *f->tbuf[1]);
+        ok = f->tbuf[0] && f->tbuf[1];
+    }
+    free(parent);
+    free(head);
+    free(next);
+    free(first);
+    free(col_super);
+    free(sub);
+    free(own);
+    free(owner);
+    if (!ok) {
+        ns_super_free(f);
+        return NULL;
+    }
+    return f;
+}
+
+/* The kernels: with GCC on x86-64 also built for AVX2 and picked at load time. The compiler
+ * does not reassociate (no -ffast-math) or contract (ISO C mode) these sums, so every variant
+ * gives the same bits. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) &&                             \
+    !defined(__SANITIZE_ADDRESS__)
+#define KERNEL __attribute__((target_clones("avx2", "default")))
+#else
+#define KERNEL
+#endif
+
+/* Supernode s: its first column k1, nc columns, nr rows (its own columns first, then nb rows
+ * below them, whose indices are `below`), values X (column-major, nr x nc). */
+typedef struct Block {
+    int k1, nc, nr, nb;
+    const float *X;
+    const int *below;
+} Block;
+
+static inline Block block_of(const NsSuperFactor *f, int s)
+{
+    Block b;
+    b.k1 = f->super[s];
+    b.nc = f->super[s + 1] - b.k1;
+    b.nr = f->pi[s + 1] - f->pi[s];
+    b.nb = b.nr - b.nc;
+    b.X = f->x + f->px[s];
+    b.below = f->rows + f->pi[s] + b.nc;
+    return b;
+}
+
+/* Forward substitution over the supernodes list[0..count) of one owner: their contributions to
+ * rows of that owner go into y, to the top part's rows into acc (when acc is given). */
+KERNEL static void forward(const NsSuperFactor *f, const int *list, int count, int self, double *y,
+                           double *acc, double *t)
+{
+    for (int q = 0; q < count; q++) {
+        Block b = block_of(f, list[q]);
+        int nc = b.nc, nr = b.nr, nb = b.nb;
+        double *ys = y + b.k1;
+        for (int i = 0; i < nb; i++)
+            t[i] = 0.0;
+        for (int j = 0; j < nc; j++) {
+            const float *col = b.X + (size_t)j * (size_t)nr;
+            double yj = ys[j] / (double)col[j];
+            ys[j] = yj;
+            for (int i = j + 1; i < nc; i++)
+                ys[i] -= (double)col[i] * yj;
+            const float *cb = col + nc;
+            for (int i = 0; i < nb; i++)
+                t[i] += (double)cb[i] * yj;
+        }
+        for (int i = 0; i < nb; i++) {
+            int r = b.below[i];
+            if (!acc || f->col_owner[r] == self)
+                y[r] -= t[i];
+            else
+                acc[r] += t[i];
+        }
+    }
+}
+
+/* Backward substitution over list[0..count) in reverse: rows below a supernode are final. */
+KERNEL static void backward(const NsSuperFactor *f, const int *list, int count, double *y,
+                            double *t)
+{
+    for (int q = count - 1; q >= 0; q--) {
+        Block b = block_of(f, list[q]);
+        int nc = b.nc, nr = b.nr, nb = b.nb;
+        double *ys = y + b.k1;
+        for (int i = 0; i < nb; i++)
+            t[i] = y[b.below[i]];
+        for (int j = nc - 1; j >= 0; j--) {
+            const float *col = b.X + (size_t)j * (size_t)nr, *cb = col + nc;
+            double u0 = 0.0, u1 = 0.0, u2 = 0.0, u3 = 0.0;
+            int i = 0;
+            for (; i + 4 <= nb; i += 4) {
+                u0 += (double)cb[i] * t[i];
+                u1 += (double)cb[i + 1] * t[i + 1];
+                u2 += (double)cb[i + 2] * t[i + 2];
+                u3 += (double)cb[i + 3] * t[i + 3];
+            }
+            for (; i < nb; i++)
+                u0 += (double)cb[i] * t[i];
+            double v = ys[j] - ((u0 + u1) + (u2 + u3));
+            for (int i2 = j + 1; i2 < nc; i2++)
+                v -= (double)col[i2] * ys[i2];
+            ys[j] = v / (double)col[j];
+        }
+    }
+}
+
+/* Bin b's part of the forward (dir 0) or backward (dir 1) substitution. */
+static void run_bin(NsSuperFactor *f, int b, int dir)
+{
+    if (dir == 0)
+        forward(f, f->list[b], f->count[b], b, f->y, f->acc[b], f->tbuf[b]);
+    else
+        backward(f, f->list[b], f->count[b], f->y, f->tbuf[b]);
+}
+
+static void run_bins(NsSuperFactor *f, int dir, int threads)
+{
+#if NS_HAVE_OPENMP
+    if (threads > 1 && f->count[0] > 0 && f->count[1] > 0) {
+#pragma omp parallel num_threads(2)
+        run_bin(f, omp_get_thread_num(), dir);
+        return;
+    }
+#else
+    (void)threads;
+#endif
+    run_bin(f, 0, dir);
+    run_bin(f, 1, dir);
+}
+
+void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
+{
+    int n = f->n;
+    double *y = f->y;
+    for (int k = 0; k < n; k++)
+        y[k] = b[f->perm[k]];
+    for (int i = 0; i < f->ntop_cols; i++) {
+        f->acc[0][f->top_cols[i]] = 0.0;
+        f->acc[1][f->top_cols[i]] = 0.0;
+    }
+    /* L y = P b: the bins, their sums into the top rows in a fixed order, then the top. */
+    run_bins(f, 0, threads);
+    for (int i = 0; i < f->ntop_cols; i++) {
+        int r = f->top_cols[i];
+        y[r] = (y[r] - f->acc[0][r]) - f->acc[1][r];
+    }
+    forward(f, f->list[TOP], f->count[TOP], TOP, y, NULL, f->tbuf[0]);
+    /* L^T z = y: the top, then the bins. */
+    backward(f, f->list[TOP], f->count[TOP], y, f->tbuf[0]);
+    run_bins(f, 1, threads);
+    for (int k = 0; k < n; k++)
+        x[f->perm[k]] = y[k];
+}

@@ -1,0 +1,38 @@
+/* A single-precision copy of a CHOLMOD supernodal Cholesky factor, applied as a preconditioner
+ * on up to two threads (docs/solvers.md, "The preconditioner's own triangular solves").
+ *
+ * The stale-factor PCG of the coupled solve (sim/coupled_schur.c, §3.6.2's linear solve done
+ * our way) spends most of its time in one forward and one backward substitution per iteration.
+ * Those stream the whole factor (2.4 M entries, 19 MB, on the 13.7k-tet prostate) through the
+ * cache for a single right-hand side, so they are bound by memory traffic, not arithmetic:
+ * storing the factor's values as floats halves the traffic. The vectors stay double, so the
+ * operator applied is exactly (up to double rounding) the inverse of L_f L_f^T, L_f the rounded
+ * factor: a fixed symmetric positive definite matrix within ~1e-7 of the stale one, which only
+ * changes how fast PCG converges, never the tolerance it converges to.
+ *
+ * Two threads: the supernodal elimination tree is cut once, when the copy is made, into two
+ * bins of whole subtrees of about equal size and a top part (their common ancestors, the last
+ * separators of the nested dissection). The forward substitution runs the two bins at once,
+ * each adding its contributions to the top part's rows into its own accumulator, then sums
+ * the two accumulators in a fixed order and finishes the top; the backward substitution does
+ * the top first, then the bins at once. The cut and every sum's order are fixed by the factor
+ * alone, so x is bit-identical whether one thread or two run it. */
+#ifndef NS_SUPERNODAL_H
+#define NS_SUPERNODAL_H
+
+#include <cholmod.h>
+
+typedef struct NsSuperFactor NsSuperFactor;
+
+/* The copy of a numeric supernodal LL^T factor (its structure copied, its values rounded to
+ * float). NULL if L is not one (simplicial, LDL^T, symbolic) or memory ran out. */
+NsSuperFactor *ns_super_from_cholmod(const cholmod_factor *L);
+void ns_super_free(NsSuperFactor *f);
+/* The order of the factored matrix. */
+int ns_super_n(const NsSuperFactor *f);
+/* x = (P^T L_f L_f^T P)^-1 b (b and x of length n, in the factored matrix's numbering; they
+ * may be the same array), with up to `threads` threads (two are used at most). Not
+ * re-entrant: the copy keeps its workspace. */
+void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads);
+
+#endif
