@@ -364,7 +364,12 @@ static void run_bins(NsSuperFactor *f, int dir, int threads)
 #if NS_HAVE_OPENMP
     if (threads > 1 && f->count[0] > 0 && f->count[1] > 0) {
 #pragma omp parallel num_threads(2)
-        run_bin(f, omp_get_thread_num(), dir);
+        {
+            int me = omp_get_thread_num();
+            run_bin(f, me, dir);
+            if (omp_get_num_threads() == 1) /* OpenMP gave one thread: it does both */
+                run_bin(f, 1, dir);
+        }
         return;
     }
 #else
@@ -372,6 +377,145 @@ static void run_bins(NsSuperFactor *f, int dir, int threads)
 #endif
     run_bin(f, 0, dir);
     run_bin(f, 1, dir);
+}
+
+/* ---- The top part: few supernodes, the largest dense blocks (the root separator). Each is
+ * done in column blocks of TOP_CB: the small triangle of a block on one thread, then the work
+ * of the rest of the supernode against the block split in two fixed halves, run at once with
+ * two threads. Which half a row or column falls in depends on the supernode alone. ---- */
+#define TOP_CB 64
+/* Supernodes with fewer stored entries are done on one thread (the same arithmetic). */
+#define TOP_PARALLEL_MIN 32768
+
+/* Forward: rows [r0, r1) of supernode b take the columns [c0, c1)' share (own rows into ys,
+ * rows below into t), each row column by column in ascending order, as forward() does. */
+KERNEL static void top_rows(Block b, double *ys, double *t, int c0, int c1, int r0, int r1)
+{
+    int own_end = r1 < b.nc ? r1 : b.nc, below0 = r0 > b.nc ? r0 : b.nc;
+    for (int j = c0; j < c1; j++) {
+        const float *col = b.X + (size_t)j * (size_t)b.nr;
+        double yj = ys[j];
+        for (int i = r0; i < own_end; i++)
+            ys[i] -= (double)col[i] * yj;
+        for (int i = below0; i < r1; i++)
+            t[i - b.nc] += (double)col[i] * yj;
+    }
+}
+
+/* Backward: w[j - c0] = the sum, for columns j in [j0, j1) of the block [c0, c1), of column
+ * j's entries times the final values below the block (rows below the supernode, in t, and its
+ * own rows from c1 on). */
+KERNEL static void top_cols(Block b, const double *ys, const double *t, int c0, int c1, int j0,
+                            int j1, double *w)
+{
+    for (int j = j0; j < j1; j++) {
+        const float *col = b.X + (size_t)j * (size_t)b.nr, *cb = col + b.nc;
+        double u0 = 0.0, u1 = 0.0, u2 = 0.0, u3 = 0.0;
+        int i = 0;
+        for (; i + 4 <= b.nb; i += 4) {
+            u0 += (double)cb[i] * t[i];
+            u1 += (double)cb[i + 1] * t[i + 1];
+            u2 += (double)cb[i + 2] * t[i + 2];
+            u3 += (double)cb[i + 3] * t[i + 3];
+        }
+        for (; i < b.nb; i++)
+            u0 += (double)cb[i] * t[i];
+        double u = (u0 + u1) + (u2 + u3);
+        for (int r = c1; r < b.nc; r++)
+            u += (double)col[r] * ys[r];
+        w[j - c0] = u;
+    }
+}
+
+/* Part `half` (0 or 1) of the parallel work of block [c0, c1) in direction dir. */
+static void top_half(Block b, double *ys, double *t, double *w, int c0, int c1, int dir, int half)
+{
+    if (dir == 0) {
+        int mid = c1 + (b.nr - c1) / 2;
+        top_rows(b, ys, t, c0, c1, half ? mid : c1, half ? b.nr : mid);
+    } else {
+        int mid = c0 + (c1 - c0) / 2;
+        top_cols(b, ys, t, c0, c1, half ? mid : c0, half ? c1 : mid, w);
+    }
+}
+
+/* The serial part of block [c0, c1): its triangle. */
+static void top_triangle(Block b, double *ys, const double *w, int c0, int c1, int dir)
+{
+    if (dir == 0) {
+        for (int j = c0; j < c1; j++) {
+            const float *col = b.X + (size_t)j * (size_t)b.nr;
+            double yj = ys[j] / (double)col[j];
+            ys[j] = yj;
+            for (int i = j + 1; i < c1; i++)
+                ys[i] -= (double)col[i] * yj;
+        }
+    } else {
+        for (int j = c1 - 1; j >= c0; j--) {
+            const float *col = b.X + (size_t)j * (size_t)b.nr;
+            double v = ys[j] - w[j - c0];
+            for (int i = j + 1; i < c1; i++)
+                v -= (double)col[i] * ys[i];
+            ys[j] = v / (double)col[j];
+        }
+    }
+}
+
+/* One top supernode, forward (dir 0: blocks first to last, then the rows below get t) or
+ * backward (dir 1: t gathered from the rows below, blocks last to first). */
+static void top_super(NsSuperFactor *f, int s, int dir, int threads)
+{
+    Block b = block_of(f, s);
+    double *y = f->y, *ys = y + b.k1, *t = f->tbuf[0], w[TOP_CB];
+    for (int i = 0; i < b.nb; i++)
+        t[i] = dir == 0 ? 0.0 : y[b.below[i]];
+    int nblocks = (b.nc + TOP_CB - 1) / TOP_CB;
+    int par = threads > 1 && (size_t)b.nr * (size_t)b.nc >= TOP_PARALLEL_MIN, done = 0;
+#if NS_HAVE_OPENMP
+    if (par) {
+#pragma omp parallel num_threads(2)
+        {
+            int me = omp_get_thread_num(), nth = omp_get_num_threads();
+            for (int k = 0; k < nblocks; k++) {
+                int kb = dir == 0 ? k : nblocks - 1 - k;
+                int c0 = kb * TOP_CB, c1 = c0 + TOP_CB < b.nc ? c0 + TOP_CB : b.nc;
+                /* Forward: the triangle, then the halves; backward: the halves, then the
+                 * triangle. Two barriers a block (dir is the same on both threads). */
+                if (dir == 0) {
+                    if (me == 0)
+                        top_triangle(b, ys, w, c0, c1, dir);
+#pragma omp barrier
+                }
+                if (me == 0)
+                    top_half(b, ys, t, w, c0, c1, dir, 0);
+                if (me == 1 || nth == 1)
+                    top_half(b, ys, t, w, c0, c1, dir, 1);
+#pragma omp barrier
+                if (dir == 1) {
+                    if (me == 0)
+                        top_triangle(b, ys, w, c0, c1, dir);
+#pragma omp barrier
+                }
+            }
+        }
+        done = 1;
+    }
+#else
+    (void)par;
+#endif
+    for (int k = 0; k < nblocks && !done; k++) {
+        int kb = dir == 0 ? k : nblocks - 1 - k;
+        int c0 = kb * TOP_CB, c1 = c0 + TOP_CB < b.nc ? c0 + TOP_CB : b.nc;
+        if (dir == 0)
+            top_triangle(b, ys, w, c0, c1, dir);
+        top_half(b, ys, t, w, c0, c1, dir, 0);
+        top_half(b, ys, t, w, c0, c1, dir, 1);
+        if (dir == 1)
+            top_triangle(b, ys, w, c0, c1, dir);
+    }
+    if (dir == 0)
+        for (int i = 0; i < b.nb; i++)
+            y[b.below[i]] -= t[i];
 }
 
 void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
@@ -390,9 +534,11 @@ void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
         int r = f->top_cols[i];
         y[r] = (y[r] - f->acc[0][r]) - f->acc[1][r];
     }
-    forward(f, f->list[TOP], f->count[TOP], TOP, y, NULL, f->tbuf[0]);
+    for (int q = 0; q < f->count[TOP]; q++)
+        top_super(f, f->list[TOP][q], 0, threads);
     /* L^T z = y: the top, then the bins. */
-    backward(f, f->list[TOP], f->count[TOP], y, f->tbuf[0]);
+    for (int q = f->count[TOP] - 1; q >= 0; q--)
+        top_super(f, f->list[TOP][q], 1, threads);
     run_bins(f, 1, threads);
     for (int k = 0; k < n; k++)
         x[f->perm[k]] = y[k];
