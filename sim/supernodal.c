@@ -289,6 +289,56 @@ static inline Block block_of(const NsSuperFactor *f, int s)
     return b;
 }
 
+/* Helpers inlined into each kernel variant. Both give sums in a fixed order. */
+typedef float v4f __attribute__((vector_size(16)));
+typedef double v4d __attribute__((vector_size(32)));
+
+/* sum a[i] t[i] over n terms: two 4-lane partial sums over blocks of 8, their lanes added
+ * pairwise, then the tail one by one. */
+static inline __attribute__((always_inline)) double dot_fd(const float *a, const double *t, int n)
+{
+    v4d s0 = {0.0, 0.0, 0.0, 0.0}, s1 = s0;
+    int i = 0;
+    for (; i + 8 <= n; i += 8) {
+        v4f a0, a1;
+        v4d t0, t1;
+        memcpy(&a0, a + i, sizeof a0);
+        memcpy(&a1, a + i + 4, sizeof a1);
+        memcpy(&t0, t + i, sizeof t0);
+        memcpy(&t1, t + i + 4, sizeof t1);
+        s0 += __builtin_convertvector(a0, v4d) * t0;
+        s1 += __builtin_convertvector(a1, v4d) * t1;
+    }
+    v4d sv = s0 + s1;
+    double sum = (sv[0] + sv[1]) + (sv[2] + sv[3]);
+    for (; i < n; i++)
+        sum += (double)a[i] * t[i];
+    return sum;
+}
+
+/* out[i] += sgn (sum over columns j in [c0, c1) of X[j ld + i] v[j]) for i in [i0, i1): four
+ * columns at a time, ((x0 v0 + x1 v1) + (x2 v2 + x3 v3)), then one at a time. sgn is 1 or -1
+ * (exact), so one loop serves both. */
+static inline __attribute__((always_inline)) void cols_acc(const float *X, size_t ld,
+                                                           const double *v, int c0, int c1, int i0,
+                                                           int i1, double sgn, double *out)
+{
+    int j = c0;
+    for (; j + 4 <= c1; j += 4) {
+        const float *x0 = X + (size_t)j * ld, *x1 = x0 + ld, *x2 = x1 + ld, *x3 = x2 + ld;
+        double v0 = sgn * v[j], v1 = sgn * v[j + 1], v2 = sgn * v[j + 2], v3 = sgn * v[j + 3];
+        for (int i = i0; i < i1; i++)
+            out[i] += ((double)x0[i] * v0 + (double)x1[i] * v1) +
+                      ((double)x2[i] * v2 + (double)x3[i] * v3);
+    }
+    for (; j < c1; j++) {
+        const float *x0 = X + (size_t)j * ld;
+        double v0 = sgn * v[j];
+        for (int i = i0; i < i1; i++)
+            out[i] += (double)x0[i] * v0;
+    }
+}
+
 /* Forward substitution over the supernodes list[0..count) of one owner: their contributions to
  * rows of that owner go into y, to the top part's rows into acc (when acc is given). */
 KERNEL static void forward(const NsSuperFactor *f, const int *list, int count, int self, double *y,
@@ -298,18 +348,16 @@ KERNEL static void forward(const NsSuperFactor *f, const int *list, int count, i
         Block b = block_of(f, list[q]);
         int nc = b.nc, nr = b.nr, nb = b.nb;
         double *ys = y + b.k1;
-        for (int i = 0; i < nb; i++)
-            t[i] = 0.0;
         for (int j = 0; j < nc; j++) {
             const float *col = b.X + (size_t)j * (size_t)nr;
             double yj = ys[j] / (double)col[j];
             ys[j] = yj;
             for (int i = j + 1; i < nc; i++)
                 ys[i] -= (double)col[i] * yj;
-            const float *cb = col + nc;
-            for (int i = 0; i < nb; i++)
-                t[i] += (double)cb[i] * yj;
         }
+        for (int i = 0; i < nb; i++)
+            t[i] = 0.0;
+        cols_acc(b.X + nc, (size_t)nr, ys, 0, nc, 0, nb, 1.0, t);
         for (int i = 0; i < nb; i++) {
             int r = b.below[i];
             if (!acc || f->col_owner[r] == self)
@@ -331,20 +379,9 @@ KERNEL static void backward(const NsSuperFactor *f, const int *list, int count, 
         for (int i = 0; i < nb; i++)
             t[i] = y[b.below[i]];
         for (int j = nc - 1; j >= 0; j--) {
-            const float *col = b.X + (size_t)j * (size_t)nr, *cb = col + nc;
-            double u0 = 0.0, u1 = 0.0, u2 = 0.0, u3 = 0.0;
-            int i = 0;
-            for (; i + 4 <= nb; i += 4) {
-                u0 += (double)cb[i] * t[i];
-                u1 += (double)cb[i + 1] * t[i + 1];
-                u2 += (double)cb[i + 2] * t[i + 2];
-                u3 += (double)cb[i + 3] * t[i + 3];
-            }
-            for (; i < nb; i++)
-                u0 += (double)cb[i] * t[i];
-            double v = ys[j] - ((u0 + u1) + (u2 + u3));
-            for (int i2 = j + 1; i2 < nc; i2++)
-                v -= (double)col[i2] * ys[i2];
+            const float *col = b.X + (size_t)j * (size_t)nr;
+            double v = ys[j] - dot_fd(col + nc, t, nb);
+            v -= dot_fd(col + j + 1, ys + j + 1, nc - j - 1);
             ys[j] = v / (double)col[j];
         }
     }
@@ -387,19 +424,15 @@ static void run_bins(NsSuperFactor *f, int dir, int threads)
 /* Supernodes with fewer stored entries are done on one thread (the same arithmetic). */
 #define TOP_PARALLEL_MIN 32768
 
-/* Forward: rows [r0, r1) of supernode b take the columns [c0, c1)' share (own rows into ys,
- * rows below into t), each row column by column in ascending order, as forward() does. */
+/* Forward: rows [r0, r1) of supernode b take the columns [c0, c1)' share (own rows from ys,
+ * rows below into t). */
 KERNEL static void top_rows(Block b, double *ys, double *t, int c0, int c1, int r0, int r1)
 {
     int own_end = r1 < b.nc ? r1 : b.nc, below0 = r0 > b.nc ? r0 : b.nc;
-    for (int j = c0; j < c1; j++) {
-        const float *col = b.X + (size_t)j * (size_t)b.nr;
-        double yj = ys[j];
-        for (int i = r0; i < own_end; i++)
-            ys[i] -= (double)col[i] * yj;
-        for (int i = below0; i < r1; i++)
-            t[i - b.nc] += (double)col[i] * yj;
-    }
+    if (r0 < own_end)
+        cols_acc(b.X, (size_t)b.nr, ys, c0, c1, r0, own_end, -1.0, ys);
+    if (below0 < r1)
+        cols_acc(b.X + b.nc, (size_t)b.nr, ys, c0, c1, below0 - b.nc, r1 - b.nc, 1.0, t);
 }
 
 /* Backward: w[j - c0] = the sum, for columns j in [j0, j1) of the block [c0, c1), of column
@@ -409,21 +442,8 @@ KERNEL static void top_cols(Block b, const double *ys, const double *t, int c0, 
                             int j1, double *w)
 {
     for (int j = j0; j < j1; j++) {
-        const float *col = b.X + (size_t)j * (size_t)b.nr, *cb = col + b.nc;
-        double u0 = 0.0, u1 = 0.0, u2 = 0.0, u3 = 0.0;
-        int i = 0;
-        for (; i + 4 <= b.nb; i += 4) {
-            u0 += (double)cb[i] * t[i];
-            u1 += (double)cb[i + 1] * t[i + 1];
-            u2 += (double)cb[i + 2] * t[i + 2];
-            u3 += (double)cb[i + 3] * t[i + 3];
-        }
-        for (; i < b.nb; i++)
-            u0 += (double)cb[i] * t[i];
-        double u = (u0 + u1) + (u2 + u3);
-        for (int r = c1; r < b.nc; r++)
-            u += (double)col[r] * ys[r];
-        w[j - c0] = u;
+        const float *col = b.X + (size_t)j * (size_t)b.nr;
+        w[j - c0] = dot_fd(col + b.nc, t, b.nb) + dot_fd(col + c1, ys + c1, b.nc - c1);
     }
 }
 
