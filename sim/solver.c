@@ -558,10 +558,9 @@ static int apply_factor(NsSolver *s, int n3, const double *r, double *z)
  * (supernodal.h) on this solve's loop threads, else with CHOLMOD's solve. */
 static int precondition(NsSolver *s, int n3, const double *r, double *z)
 {
-    if (!s->sf || ns_super_n(s->sf) != s->nfree)
-        return apply_factor(s, n3, r, z);
-    if (ensure((void **)&s->pbuf, &s->pbuf_cap, s->nfree, sizeof(double)))
-        return -1;
+    if (!s->sf || ns_super_n(s->sf) != s->nfree ||
+        ensure((void **)&s->pbuf, &s->pbuf_cap, s->nfree, sizeof(double)))
+        return apply_factor(s, n3, r, z); /* no copy, or no memory for its vector */
     double *w = s->pbuf;
     for (int i = 0; i < n3; i++)
         if (s->dof[i] >= 0)

@@ -102,8 +102,9 @@ int ns_solver_factor(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fix
 int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z);
 /* z ~ A^-1 r with the current factor's single-precision copy (supernodal.h), on the solver's
  * threads (two at most, one while a refactorization runs in the background; z is the same for
- * every count): a preconditioner, within ~1e-7 of ns_solver_apply's answer, about twice as
- * fast. Falls back to ns_solver_apply's solve if the copy could not be made. Fixed DOFs as
+ * every count): a preconditioner whose answer differs from ns_solver_apply's by ~1e-7 times
+ * A's condition number (relative), two to five times as fast. Falls back to ns_solver_apply's
+ * solve if the copy could not be made or its vector not allocated. Fixed DOFs as
  * ns_solver_apply. Returns 0, or -1 (no factor, n3 differs, memory). */
 int ns_solver_precondition(NsSolver *s, int n3, const double *r, double *z);
 /* Counts the factors made so far: it changes whenever the factor in use changes. */

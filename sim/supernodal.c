@@ -144,9 +144,9 @@ static int cut_tree(NsSuperFactor *f, const int *head, const int *next, const in
 
 NsSuperFactor *ns_super_from_cholmod(const cholmod_factor *L)
 {
-    if (!L || !L->is_super || !L->is_ll || L->xtype != CHOLMOD_REAL || !L->x ||
-        L->itype != CHOLMOD_INT)
-        return NULL;
+    if (!L || !L->is_super || !L->is_ll || L->xtype != CHOLMOD_REAL || L->dtype != CHOLMOD_DOUBLE ||
+        !L->x || L->itype != CHOLMOD_INT || L->minor < L->n)
+        return NULL; /* not a complete numeric supernodal LL^T factor of doubles */
     NsSuperFactor *f = calloc(1, sizeof *f);
     if (!f)
         return NULL;
@@ -240,9 +240,16 @@ NsSuperFactor *ns_super_from_cholmod(const cholmod_factor *L)
         for (int k = 0; k < n; k++)
             if (f->col_owner[k] == TOP)
                 f->top_cols[f->ntop_cols++] = k;
+        /* What the solve relies on: a bin's supernodes send their rows below only to their own
+         * bin or to the top (true of any postordered tree; checked, not assumed). */
+        for (int s = 0; s < ns && ok; s++)
+            for (int p = Lpi[s] + (Ls[s + 1] - Ls[s]); p < Lpi[s + 1] && ok; p++) {
+                int o = f->col_owner[Lrows[p]];
+                ok = owner[s] == TOP ? o == TOP : (o == owner[s] || o == TOP);
+            }
         f->tbuf[0] = malloc((size_t)max_below * sizeof *f->tbuf[0]);
         f->tbuf[1] = malloc((size_t)max_below * sizeof *f->tbuf[1]);
-        ok = f->tbuf[0] && f->tbuf[1];
+        ok = ok && f->tbuf[0] && f->tbuf[1];
     }
     free(parent);
     free(head);

@@ -7,8 +7,9 @@
  * cache for a single right-hand side, so they are bound by memory traffic, not arithmetic:
  * storing the factor's values as floats halves the traffic. The vectors stay double, so the
  * operator applied is exactly (up to double rounding) the inverse of L_f L_f^T, L_f the rounded
- * factor: a fixed symmetric positive definite matrix within ~1e-7 of the stale one, which only
- * changes how fast PCG converges, never the tolerance it converges to.
+ * factor: a fixed symmetric positive definite matrix within ~1e-7 (relative) of L L^T, whose
+ * answers differ from the double solve's by ~1e-7 times the condition number. That changes
+ * how fast PCG converges, never the tolerance it converges to.
  *
  * Two threads: the supernodal elimination tree is cut once, when the copy is made, into two
  * bins of whole subtrees of about equal size and a top part (their common ancestors, the last
