@@ -1060,6 +1060,13 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     double *bt = ns_tissue_begin_step(T, dt, bev_t ? bev_t : ext_tissue, &ts);
     free(bev_t);
     free(bev_r);
+    if (!bt) {
+        snprintf(c->error, sizeof c->error, "out of memory assembling the tissue matrix");
+        ns_rod_abort_step(r);
+        if (stats)
+            *stats = st;
+        return -1;
+    }
     st.tissue_ms = now_ms() - tt;
     double tl = now_ms();
 

@@ -77,8 +77,10 @@ struct NsSolver {
     int cm_started;
     cholmod_factor *Lsym; /* symbolic analysis (ordering, supernodes) for `pattern` */
     cholmod_factor *L;    /* numeric factor in use (possibly stale), NULL if none */
-    NsSuperFactor *sf;    /* L's single-precision copy for preconditioning (supernodal.h), or
-                             NULL (then CHOLMOD's solve preconditions) */
+    NsSuperFactor *sf;    /* L's single-precision copy for preconditioning (supernodal.h), made
+                             at L's first preconditioning (a background refactorization makes
+                             it on its thread), or NULL: then CHOLMOD's solve preconditions */
+    int sf_tried;         /* the copy of this L was attempted */
     double *pbuf;         /* (nfree) its right-hand side */
     int pbuf_cap;
     cholmod_factor *spare; /* a numeric factor of the same analysis no longer in use: the next
@@ -214,17 +216,18 @@ static void job_cancel(NsSolver *s)
     j->pending = 0;
 }
 
-/* Makes s->sf the single-precision copy of s->L (none if there is no L or no memory). */
-static void make_super(NsSolver *s)
+/* Drops the single-precision copy: s->L changed. The next preconditioning makes one (solvers
+ * that only solve exactly never pay for it). */
+static void drop_super(NsSolver *s)
 {
     ns_super_free(s->sf);
-    s->sf = s->L ? ns_super_from_cholmod(s->L) : NULL;
+    s->sf = NULL;
+    s->sf_tried = 0;
 }
 
 static void free_factors(NsSolver *s)
 {
-    ns_super_free(s->sf);
-    s->sf = NULL;
+    drop_super(s);
     if (s->L)
         cholmod_free_factor(&s->L, &s->cm);
     if (s->spare)
@@ -284,7 +287,7 @@ void ns_solver_refresh(NsSolver *s)
     else if (s->L)
         cholmod_free_factor(&s->L, &s->cm);
     s->L = NULL;
-    make_super(s);
+    drop_super(s);
 }
 
 static int ensure(void **p, int *cap, int need, size_t elem)
@@ -405,10 +408,10 @@ static int factor_sync(NsSolver *s, const NsBlockMatrix *A, int nfree, uint64_t 
     if (rc) {
         if (s->L)
             cholmod_free_factor(&s->L, &s->cm);
-        make_super(s);
+        drop_super(s);
         return -1;
     }
-    make_super(s);
+    drop_super(s);
     s->factor_solve = s->solves;
     s->factors++;
     return 0;
@@ -511,8 +514,9 @@ static void job_adopt(NsSolver *s, uint64_t h, int nfree, NsSolveStats *st)
         s->spare = s->L;
         s->L = j->L;
         j->L = NULL;
-        ns_super_free(s->sf);
+        drop_super(s);
         s->sf = j->sf;
+        s->sf_tried = s->sf != NULL;
         j->sf = NULL;
         s->factor_solve = j->made_at;
         s->factors++;
@@ -558,6 +562,10 @@ static int apply_factor(NsSolver *s, int n3, const double *r, double *z)
  * (supernodal.h) on this solve's loop threads, else with CHOLMOD's solve. */
 static int precondition(NsSolver *s, int n3, const double *r, double *z)
 {
+    if (!s->sf && !s->sf_tried && s->L) {
+        s->sf = ns_super_from_cholmod(s->L);
+        s->sf_tried = 1;
+    }
     if (!s->sf || ns_super_n(s->sf) != s->nfree ||
         ensure((void **)&s->pbuf, &s->pbuf_cap, s->nfree, sizeof(double)))
         return apply_factor(s, n3, r, z); /* no copy, or no memory for its vector */

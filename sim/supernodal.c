@@ -84,8 +84,9 @@ static double lpt(const int *front, int nf, const double *sub, int *order, unsig
 }
 
 /* Cuts the supernodal tree (parent, children lists head/next, subtree sizes sub, own sizes
- * own): the top part grows from the roots by the largest frontier subtree at a time, and the
- * cut that minimizes (heavier bin + top) is kept. Fills owner[s]. Returns 0 or -1. */
+ * own): the top part grows from the roots by the largest frontier subtree at a time, and of
+ * the first MAX_EXPAND cuts the one with the smallest (heavier bin + top) is kept (greedy, not
+ * an optimum). Fills owner[s]. Returns 0 or -1. */
 static int cut_tree(NsSuperFactor *f, const int *head, const int *next, const int *first,
                     const double *sub, const double *own, const int *parent, unsigned char *owner)
 {

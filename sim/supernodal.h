@@ -2,10 +2,10 @@
  * on up to two threads (docs/solvers.md, "The preconditioner's own triangular solves").
  *
  * The stale-factor PCG of the coupled solve (sim/coupled_schur.c, §3.6.2's linear solve done
- * our way) spends most of its time in one forward and one backward substitution per iteration.
+ * our way) spent nearly half the step in one forward and one backward substitution an iteration.
  * Those stream the whole factor (2.4 M entries, 19 MB, on the 13.7k-tet prostate) through the
- * cache for a single right-hand side, so they are bound by memory traffic, not arithmetic:
- * storing the factor's values as floats halves the traffic. The vectors stay double, so the
+ * cache for a single right-hand side, two flops an entry, so memory traffic counts: storing
+ * the factor's values as floats halves it. The vectors stay double, so the
  * operator applied is exactly (up to double rounding) the inverse of L_f L_f^T, L_f the rounded
  * factor: a fixed symmetric positive definite matrix within ~1e-7 (relative) of L L^T, whose
  * answers differ from the double solve's by ~1e-7 times the condition number. That changes
@@ -16,8 +16,9 @@
  * separators of the nested dissection). The forward substitution runs the two bins at once,
  * each adding its contributions to the top part's rows into its own accumulator, then sums
  * the two accumulators in a fixed order and finishes the top; the backward substitution does
- * the top first, then the bins at once. The cut and every sum's order are fixed by the factor
- * alone, so x is bit-identical whether one thread or two run it. */
+ * the top first, then the bins at once. The top's large supernodes are split too, in column
+ * blocks whose rows or columns go to two fixed halves. The cut and every sum's order are fixed by
+ * the factor alone, so x is bit-identical whether one thread or two run it. */
 #ifndef NS_SUPERNODAL_H
 #define NS_SUPERNODAL_H
 

@@ -685,7 +685,7 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
 /* Row i of A = M - c1 K - c2 D on K's pattern (D shares it: both are scattered at the same
  * pairs). The three rows are sorted by column, so one walk finds the blocks; a block missing in
  * A is inserted (only row i's arrays change, so rows can be built on any thread). */
-static void build_row(NsTissue *t, int i, double c1, double c2)
+static int build_row(NsTissue *t, int i, double c1, double c2)
 {
     const NsBlockRow *kr = &t->K.rows[i], *dr = &t->D.rows[i];
     NsBlockRow *ar = &t->A.rows[i];
@@ -700,29 +700,36 @@ static void build_row(NsTissue *t, int i, double c1, double c2)
             pa++;
         double *ab =
             pa < ar->count && ar->col[pa] == j ? ar->val + 9 * pa : ns_bsm_get(&t->A, i, j);
+        if (!ab)
+            return -1; /* out of memory */
         for (int q = 0; q < 9; q++)
             ab[q] = -c1 * kb[q] - c2 * (db ? db[q] : 0.0);
     }
     double *d = ns_bsm_get(&t->A, i, i);
+    if (!d)
+        return -1;
     for (int c = 0; c < 3; c++)
         d[4 * c] += t->mass[i] > 0.0 ? t->mass[i] : 1.0; /* unused slots: identity */
+    return 0;
 }
 
-static void build_system(NsTissue *t, double c1, double c2)
+/* A, row by row (on the tissue's threads). Returns 0, or -1 if a row ran out of memory. */
+static int build_system(NsTissue *t, double c1, double c2)
 {
-    int threads = t->params.threads > 1 ? t->params.threads : 1;
+    int threads = t->params.threads > 1 ? t->params.threads : 1, failed = 0;
 #if NS_HAVE_OPENMP
     if (threads > 1 && t->K.n >= NS_BSM_PARALLEL_MIN_ROWS) {
-#pragma omp parallel for num_threads(threads) schedule(static)
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(| : failed)
         for (int i = 0; i < t->K.n; i++)
-            build_row(t, i, c1, c2);
-        return;
+            failed |= build_row(t, i, c1, c2) != 0;
+        return failed ? -1 : 0;
     }
 #else
     (void)threads;
 #endif
     for (int i = 0; i < t->K.n; i++)
-        build_row(t, i, c1, c2);
+        failed |= build_row(t, i, c1, c2) != 0;
+    return failed ? -1 : 0;
 }
 
 double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissueStats *st)
@@ -737,7 +744,8 @@ double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissue
         for (int i = 0; i < n3; i++)
             M->a[i] = t->dof_fixed[i] ? 0.0 : (t->force[i] + (ext ? ext[i] : 0.0)) / t->mass[i / 3];
     }
-    build_system(t, beta * dt * dt, gamma * dt);
+    if (build_system(t, beta * dt * dt, gamma * dt))
+        return NULL;
     double *rhs = t->work, *y = rhs + n3, *z = y + n3;
     for (int i = 0; i < n3; i++) {
         y[i] = dt * M->v[i] + dt * dt * (0.5 - beta) * M->a[i];
@@ -774,6 +782,12 @@ int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
     NsMesh *M = &t->mesh;
     int n3 = 3 * M->node_slots;
     double *rhs = ns_tissue_begin_step(t, dt, ext, &st);
+    if (!rhs) {
+        st.total_ms = now_ms() - t0;
+        if (stats)
+            *stats = st;
+        return -1;
+    }
     double ts = now_ms();
     double *anew = rhs + 3 * n3;
     for (int i = 0; i < n3; i++)
@@ -833,7 +847,11 @@ int ns_tissue_static_solve(NsTissue *t, NsSolver *solver, const double *ext, dou
             st.unconverged++;
             break;
         }
-        build_system(t, 1.0, 0.0);
+        if (build_system(t, 1.0, 0.0)) {
+            if (stats)
+                *stats = st;
+            return -1;
+        }
         /* A = M - K: remove the mass again, the static tangent is -K. */
         for (int i = 0; i < t->A.n; i++) {
             double *d = ns_bsm_get(&t->A, i, i);

@@ -135,7 +135,8 @@ int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
 /* The step in parts, for a caller that solves the tissue together with the needle
  * (sim/coupling.h): begin_step evaluates the forces (into stats), assembles t->A and returns
  * the right-hand side (3 node_slots, in t->work; the next 3 x 3 node_slots of t->work are free
- * scratch for the caller); end_step applies the Newmark update with the accelerations anew. */
+ * scratch for the caller), or NULL if the system matrix could not be assembled (out of memory;
+ * the state is unchanged); end_step applies the Newmark update with the accelerations anew. */
 double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissueStats *st);
 void ns_tissue_end_step(NsTissue *t, double dt, const double *anew);
 
