@@ -91,6 +91,9 @@ typedef struct NsTissue {
     int *part_nodes;      /* (node_slots) */
     int *part_tet_start;  /* (part_count + 1) */
     int *part_tets;       /* (alive tets) */
+    int *node_part;       /* (node_part_cap) the part of each node slot at the last partition */
+    int node_part_cap;
+    int part_metis_age; /* partitions since METIS last ran (the others are patched) */
     int *colpos; /* (part_count x node_slots) per-thread scratch for the row gather, all -1 */
 } NsTissue;
 

@@ -93,6 +93,29 @@ static int rows_match_full_gather(NsTissue *t)
     return 0;
 }
 
+/* The work partition lists every node slot and every alive tet exactly once. */
+static int partition_covers(const NsTissue *t)
+{
+    const NsMesh *M = &t->mesh;
+    int parts = t->part_count;
+    ENSURE(parts >= 1);
+    ENSURE(t->part_node_start[parts] == M->node_slots);
+    int alive = 0;
+    for (int e = 0; e < M->tet_slots; e++)
+        alive += ns_mesh_tet_alive(M, e);
+    ENSURE(t->part_tet_start[parts] == alive);
+    char *seen = calloc((size_t)(M->node_slots + M->tet_slots) + 1, 1);
+    ENSURE(seen != NULL);
+    for (int k = 0; k < M->node_slots; k++)
+        ENSURE(seen[t->part_nodes[k]]++ == 0);
+    for (int k = 0; k < alive; k++) {
+        ENSURE(ns_mesh_tet_alive(M, t->part_tets[k]));
+        ENSURE(seen[M->node_slots + t->part_tets[k]]++ == 0);
+    }
+    free(seen);
+    return 0;
+}
+
 static int remesh_rows_gathered_with(int threads)
 {
     NsMesh m;
@@ -127,6 +150,11 @@ static int remesh_rows_gathered_with(int threads)
     ENSURE(ns_tissue_sync_topology(&t, err, sizeof err) == 0);
     ns_tissue_forces(&t, 0, NULL);
     ENSURE(rows_match_full_gather(&t) == 0);
+    /* With parts, the split's partition was the last one patched (the new node placed among
+     * its neighbours' parts), not METIS's again. */
+    ENSURE(partition_covers(&t) == 0);
+    if (t.part_count > 1)
+        ENSURE(t.part_metis_age == 1);
     ENSURE(ns_remesh_undo(M, &s) == 0);
     ENSURE(ns_tissue_sync_topology(&t, err, sizeof err) == 0);
     ns_tissue_forces(&t, 0, NULL);
@@ -141,6 +169,7 @@ static int remesh_rows_gathered_with(int threads)
     ENSURE(ns_tissue_sync_topology(&t, err, sizeof err) == 0);
     ns_tissue_forces(&t, 0, NULL);
     ENSURE(rows_match_full_gather(&t) == 0);
+    ENSURE(partition_covers(&t) == 0);
     ns_remesh_stack_free(&s);
     ns_tissue_free(&t);
     ns_mesh_free(&m);
