@@ -620,7 +620,16 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
     for (int i = 0; i < S->nr3; i++)
         if (!S->rfixed[i])
             p[nt3 + i] = 0.0;
-    hmul(S, p, hp);
+    int tissue_held = 0; /* a held tissue DOF with a nonzero acceleration (none, as a rule) */
+    for (int i = 0; i < nt3 && !tissue_held; i++)
+        tissue_held = p[i] != 0.0;
+    if (tissue_held) {
+        hmul(S, p, hp);
+    } else { /* the same numbers without the product of A_t with zeros */
+        memset(hp, 0, (size_t)nt3 * sizeof *hp);
+        ns_banded_mul(S->Ar, p + nt3, hp + nt3);
+        mask_fixed(S, hp);
+    }
     double bnorm = 0.0;
     for (int i = 0; i < n; i++) {
         int fixed = i < nt3 ? S->tfixed[i] : S->rfixed[i - nt3];
