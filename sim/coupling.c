@@ -1033,28 +1033,27 @@ static double free_dot(const double *x, const double *y, const uint8_t *fixed, i
 
 /* The solve's starting accelerations (both solvers'). Last step's accelerations are a poor guess
  * as they stand: where the tissue is stiff for the step (omega dt >> 1, most of its modes here)
- * the trapezoidal rule makes the acceleration alternate, a_(n+1) ~ -a_n, and a_n is twice as far
- * from the answer as a zero start (docs/coupling.md, "The starting guess"). Each side's free part
- * d is scaled instead by the alpha that minimizes the error in the norm of its own matrix,
- * alpha = d.(b - A x_held) / d.A d: near -1 in the quasi-static regime, near +1 in a free fall,
- * and never worse than a zero start in that norm. Costs one product with each matrix. The
- * constraints are met afterwards by the solver's own feasible start. Returns 0, or -1 (out of
- * memory). */
+ * Newmark's scheme (gamma >= 1/2) makes the acceleration alternate, a_(n+1) ~ -a_n, and a_n is
+ * twice as far from the answer as a zero start (docs/coupling.md, "The starting guess"). Each
+ * side's free part d is scaled instead by the alpha that minimizes the error in the norm of its
+ * own matrix, alpha = d.(b - A x_held) / d.A d (0 if d.A d is not positive): near -1 in the
+ * quasi-static regime, near +1 in a free fall, and never worse than a zero start in that norm.
+ * Costs one product with the tissue matrix and two with the needle's band. The constraints are
+ * met afterwards by the solver's own feasible start. Returns 0, or -1 (out of memory). */
 static int scale_start(CoupledSystem *S)
 {
-    double *w = malloc(((size_t)S->nt3 + 3 * (size_t)S->nr3 + 1) * sizeof *w);
+    int n = S->nr3;
+    double *w = malloc(((size_t)S->nt3 + 4 * (size_t)n + 1) * sizeof *w);
     if (!w)
         return -1;
-    double *Ad = w, *d = w + S->nt3;
+    double *Ad = w, *d = w + S->nt3, *h = d + n, *Ah = h + n, *Adn = Ah + n;
     ns_bsm_mul_threads(S->At, S->at, Ad, S->threads);
     double num = free_dot(S->at, S->bt, S->tfixed, S->nt3);
     double den = free_dot(S->at, Ad, S->tfixed, S->nt3);
-    if (den > 0.0 && isfinite(num / den))
-        for (int i = 0; i < S->nt3; i++)
-            S->at[i] *= num / den;
+    double alpha = den > 0.0 && isfinite(num / den) ? num / den : 0.0;
+    for (int i = 0; i < S->nt3; i++)
+        S->at[i] *= alpha;
     /* The needle: held DOFs keep their prescribed accelerations (x_held), the free ones d. */
-    int n = S->nr3;
-    double *Ah = d + n, *Adn = Ah + n, *h = w;
     for (int i = 0; i < n; i++) {
         h[i] = S->rfixed[i] ? S->ar[i] : 0.0;
         d[i] = S->rfixed[i] ? 0.0 : S->ar[i];
@@ -1068,10 +1067,10 @@ static int scale_start(CoupledSystem *S)
             num += d[i] * (S->br[i] - Ah[i]);
             den += d[i] * Adn[i];
         }
-    if (den > 0.0 && isfinite(num / den))
-        for (int i = 0; i < n; i++)
-            if (!S->rfixed[i])
-                S->ar[i] *= num / den;
+    alpha = den > 0.0 && isfinite(num / den) ? num / den : 0.0;
+    for (int i = 0; i < n; i++)
+        if (!S->rfixed[i])
+            S->ar[i] *= alpha;
     free(w);
     return 0;
 }
@@ -1155,6 +1154,8 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         free(iw);
         free(sw);
         ns_rod_abort_step(r);
+        if (stats)
+            *stats = st;
         return -1;
     }
     S.tw = w;
@@ -1233,6 +1234,8 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         free(iw);
         free(sw);
         ns_rod_abort_step(r);
+        if (stats)
+            *stats = st;
         return -1;
     }
     for (int k = 0; k < q; k++)

@@ -54,13 +54,15 @@ void ns_sym3_eigen(double A[9], double V[9])
     jacobi(A, V);
 }
 
-/* Whether V0 is a rotation to within 1e-6 (a usable starting basis). */
+/* Whether V0 is a rotation to within 1e-12 (a usable starting basis: V0^T A V0 is then A's
+ * similarity transform to round-off; a V passed back step after step, which drifts by a few ulp
+ * a step, is started from I again when it has drifted that far). */
 static int is_rotation(const double V0[9])
 {
     for (int i = 0; i < 3; i++)
         for (int j = i; j < 3; j++) {
             double d = V0[i] * V0[j] + V0[3 + i] * V0[3 + j] + V0[6 + i] * V0[6 + j];
-            if (!(fabs(d - (i == j)) <= 1e-6))
+            if (!(fabs(d - (i == j)) <= 1e-12))
                 return 0;
         }
     double det = V0[0] * (V0[4] * V0[8] - V0[5] * V0[7]) - V0[1] * (V0[3] * V0[8] - V0[5] * V0[6]) +
@@ -101,7 +103,7 @@ void ns_svd3_from(const double F[9], const double *V0, double U[9], double s[3],
             A[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j];
     if (V0 && is_rotation(V0)) {
         /* Warm start: Jacobi on V0^T (F^T F) V0, nearly diagonal when V0 is last step's V, so
-         * one or two sweeps instead of three to five; V = V0 J. */
+         * about two sweeps instead of three or four; V = V0 J. */
         double B[9];
         for (int i = 0; i < 3; i++)
             for (int j = 0; j < 3; j++)

@@ -410,6 +410,8 @@ static int partition(NsTissue *t, int parts)
     if (parts > 1 && prev_parts == parts && patch_partition(t, parts, part) == 0) {
         t->part_metis_age++;
     } else if (parts > 1) {
+        for (int i = 0; i < nn; i++) /* a rejected patch may have written part */
+            part[i] = (int)((int64_t)i * parts / nn);
         /* The graph of alive nodes (compacted) joined by tet edges; vertex weight = incident
          * tets, which is what phase 1 costs per node once tets go to their nodes' part. */
         idx_t nv = 0, ncon = 1, np = parts, cut = 0;
@@ -474,9 +476,11 @@ static int partition(NsTissue *t, int parts)
             t->node_part_cap = nn;
         }
     }
-    if (parts > 1 && t->node_part && nn <= t->node_part_cap)
-        memcpy(t->node_part, part, (size_t)nn * sizeof *part);
-    else
+    if (parts > 1 && t->node_part && nn <= t->node_part_cap) {
+        /* Dead slots keep no part: a slot reused by a new node joins its neighbours' part. */
+        for (int i = 0; i < nn; i++)
+            t->node_part[i] = (M->flags[i] & NS_NODE_ALIVE) ? part[i] : -1;
+    } else
         t->part_metis_age = -1; /* nothing to patch next time */
 
     /* Nodes and tets grouped by part (counting sort, ascending index within a part). */
@@ -808,8 +812,10 @@ static int build_row(NsTissue *t, int i, double c1, double c2, const double *y, 
 }
 
 /* A, row by row (on the tissue's threads), and with y given (node_slots long) ky = K y and
- * dz = D z on the rows of node slots; the others (no sync since the mesh grew) are zero.
- * Returns 0, or -1 if a row ran out of memory. */
+ * dz = D z on the rows of node slots; the others (no sync since the mesh grew) are zero. K never
+ * has more rows than node slots (a mesh loses slots only in ns_mesh_compact, before
+ * ns_tissue_init), so every column j of a product is a node slot. Returns 0, or -1 if a row
+ * ran out of memory. */
 static int build_system(NsTissue *t, double c1, double c2, const double *y, const double *z,
                         double *ky, double *dz)
 {
