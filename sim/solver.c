@@ -853,6 +853,14 @@ int ns_solver_precondition(NsSolver *s, int n3, const double *r, double *z)
     return precondition(s, n3, r, z);
 }
 
+int ns_solver_precondition_cut(const NsSolver *s, size_t entries[3])
+{
+    if (!s || !s->sf)
+        return -1;
+    ns_super_cut(s->sf, entries);
+    return 0;
+}
+
 long ns_solver_factor_count(const NsSolver *s)
 {
     return s ? s->factors : 0;

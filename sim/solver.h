@@ -34,6 +34,7 @@
 #ifndef NS_SOLVER_H
 #define NS_SOLVER_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "sparse.h"
@@ -107,6 +108,10 @@ int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z);
  * solve if the copy could not be made or its vector not allocated. Fixed DOFs as
  * ns_solver_apply. Returns 0, or -1 (no factor, n3 differs, memory). */
 int ns_solver_precondition(NsSolver *s, int n3, const double *r, double *z);
+/* The stored values in each part of the single-precision copy's two-thread cut (bin 0, bin 1,
+ * the top; supernodal.h). Returns 0, or -1 if there is no copy (none made yet: a factor's copy is
+ * made at its first preconditioning). */
+int ns_solver_precondition_cut(const NsSolver *s, size_t entries[3]);
 /* Counts the factors made so far: it changes whenever the factor in use changes. */
 long ns_solver_factor_count(const NsSolver *s);
 /* Schedules a factorization of A (which must have the pattern and fixed DOFs of the factor in

@@ -59,6 +59,17 @@ int ns_super_n(const NsSuperFactor *f)
     return f ? f->n : 0;
 }
 
+void ns_super_cut(const NsSuperFactor *f, size_t entries[3])
+{
+    for (int o = 0; o < 3; o++) {
+        entries[o] = 0;
+        for (int q = 0; f && q < f->count[o]; q++) {
+            int s = f->list[o][q];
+            entries[o] += f->px[s + 1] - f->px[s];
+        }
+    }
+}
+
 /* Puts the subtrees of the frontier nodes (sub: subtree sizes) into two bins, largest first
  * into the lighter one; bin[k] receives the frontier node k's bin. Returns the heavier bin's
  * size. Ties go to bin 0, and equal sizes keep their order, so the cut is deterministic. */

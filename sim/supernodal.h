@@ -32,6 +32,8 @@ NsSuperFactor *ns_super_from_cholmod(const cholmod_factor *L);
 void ns_super_free(NsSuperFactor *f);
 /* The order of the factored matrix. */
 int ns_super_n(const NsSuperFactor *f);
+/* Stored values of the two-thread cut's parts: bin 0, bin 1, the top (tests, diagnostics). */
+void ns_super_cut(const NsSuperFactor *f, size_t entries[3]);
 /* x = (P^T L_f L_f^T P)^-1 b (b and x of length n, in the factored matrix's numbering; they
  * may be the same array), with up to `threads` threads (two are used at most). Not
  * re-entrant: the copy keeps its workspace. */

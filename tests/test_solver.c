@@ -484,6 +484,14 @@ static int single_precision_preconditioner(void)
     ns_solver_set_threads(s, 2);
     ENSURE(ns_solver_precondition(s, n3, b, z2) == 0);
     ENSURE(memcmp(z1, z2, (size_t)n3 * sizeof *z1) == 0);
+    /* The two threads had work each: both bins hold whole subtrees, of comparable size, and the
+     * top (the last separators) is a part of the factor, not all of it. */
+    size_t cut[3];
+    ENSURE(ns_solver_precondition_cut(s, cut) == 0);
+    printf("  cut: bins %zu and %zu stored values, top %zu\n", cut[0], cut[1], cut[2]);
+    ENSURE(cut[0] > 0 && cut[1] > 0 && cut[2] > 0);
+    ENSURE(cut[0] <= 2 * cut[1] && cut[1] <= 2 * cut[0]);
+    ENSURE(cut[2] < cut[0] + cut[1]);
     double err = 0.0, nrm = 0.0;
     for (int i = 0; i < n3; i++) {
         if (fixed[i])
