@@ -91,14 +91,7 @@ int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterati
         kappa += blk ? (blk[0] + blk[4] + blk[8]) / 3.0 : 1.0;
     }
     kappa = S->q > 0 ? kappa / S->q : 1.0;
-    for (int i = 0; i < S->nt3; i++) {
-        const double *blk = ns_bsm_find(S->At, i / 3, i / 3);
-        sc[i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
-    }
-    for (int i = 0; i < S->nr3; i++) {
-        const double *blk = ns_banded_block((NsBanded *)S->Ar, i / 3, i / 3);
-        sc[S->nt3 + i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
-    }
+    coupled_unit_scale(S, sc);
     for (int i = S->nt3 + S->nr3; i < n; i++)
         sc[i] = sqrt(kappa);
     /* Right-hand side with the known dynamic friction, and the starting point. */

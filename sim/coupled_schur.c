@@ -795,14 +795,7 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
     }
     double *slide = h2 + q3, *ptmp = slide + q, *nscratch = ptmp + q3;
     /* Scaling of the residual norm: as the paper solver's, a unit diagonal. */
-    for (int i = 0; i < S->nt3; i++) {
-        const double *blk = ns_bsm_find(S->At, i / 3, i / 3);
-        w->sc[i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
-    }
-    for (int i = 0; i < S->nr3; i++) {
-        const double *blk = ns_banded_block((NsBanded *)S->Ar, i / 3, i / 3);
-        w->sc[S->nt3 + i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
-    }
+    coupled_unit_scale(S, w->sc);
     int rc = 0;
     w->refreshed = 0;
     ns_solver_set_threads(w->fac, S->threads);

@@ -1021,6 +1021,19 @@ static int bevel_force(NsCoupled *c, const double *ext_tissue, const double *ext
     return 0;
 }
 
+void coupled_unit_scale(const CoupledSystem *S, double *sc)
+{
+    for (int i = 0; i < S->nt3; i += 3) { /* one look-up per node */
+        const double *blk = ns_bsm_find(S->At, i / 3, i / 3);
+        for (int c = 0; c < 3 && i + c < S->nt3; c++)
+            sc[i + c] = blk && blk[4 * c] > 0.0 ? 1.0 / sqrt(blk[4 * c]) : 1.0;
+    }
+    for (int i = 0; i < S->nr3; i++) {
+        const double *blk = ns_banded_block((NsBanded *)S->Ar, i / 3, i / 3);
+        sc[S->nt3 + i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
+    }
+}
+
 /* sum over the rows not fixed of x_i y_i */
 static double free_dot(const double *x, const double *y, const uint8_t *fixed, int n)
 {

@@ -34,6 +34,9 @@ typedef struct CoupledSystem {
 
 /* The tissue point's value of a 3-vector field v (nodes x 3). */
 void coupled_point(const CoupledSystem *S, int k, const double *v, double *out);
+/* sc (nt3 + nr3) = 1 / sqrt of each unknown's diagonal entry in A_t or A_n (1 where that is
+ * not positive): the scaling to a unit diagonal that both solvers measure residuals in. */
+void coupled_unit_scale(const CoupledSystem *S, double *sc);
 /* Known tangential force on the needle of coupling node k in state s (DYNAMIC: -sign f). */
 double coupled_known_force(const CoupledSystem *S, int k, int s);
 /* Relative tangential displacement of the step, tissue minus needle, at node k for the
