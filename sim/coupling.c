@@ -1130,6 +1130,7 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     if (!bt) {
         snprintf(c->error, sizeof c->error, "out of memory assembling the tissue matrix");
         ns_rod_abort_step(r);
+        st.total_ms = now_ms() - t0;
         if (stats)
             *stats = st;
         return -1;
@@ -1167,6 +1168,7 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         free(iw);
         free(sw);
         ns_rod_abort_step(r);
+        st.total_ms = now_ms() - t0;
         if (stats)
             *stats = st;
         return -1;
@@ -1247,6 +1249,7 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         free(iw);
         free(sw);
         ns_rod_abort_step(r);
+        st.total_ms = now_ms() - t0;
         if (stats)
             *stats = st;
         return -1;

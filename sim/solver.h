@@ -109,8 +109,8 @@ int ns_solver_apply(NsSolver *s, int n3, int ncols, const double *B, double *Z);
  * ns_solver_apply. Returns 0, or -1 (no factor, n3 differs, memory). */
 int ns_solver_precondition(NsSolver *s, int n3, const double *r, double *z);
 /* The stored values in each part of the single-precision copy's two-thread cut (bin 0, bin 1,
- * the top; supernodal.h). Returns 0, or -1 if there is no copy (none made yet: a factor's copy is
- * made at its first preconditioning). */
+ * the top; supernodal.h). Returns 0, or -1 if there is no copy (not made yet, or it could not
+ * be: memory, or a factor that is not supernodal). */
 int ns_solver_precondition_cut(const NsSolver *s, size_t entries[3]);
 /* Counts the factors made so far: it changes whenever the factor in use changes. */
 long ns_solver_factor_count(const NsSolver *s);

@@ -477,7 +477,9 @@ static int partition(NsTissue *t, int parts)
         }
     }
     if (parts > 1 && t->node_part && nn <= t->node_part_cap) {
-        /* Dead slots keep no part: a slot reused by a new node joins its neighbours' part. */
+        /* Dead slots keep no part: a slot dead now and reused by the next partition votes with
+         * its neighbours (one that dies and is reused in between keeps its part: locality
+         * only, never a result). */
         for (int i = 0; i < nn; i++)
             t->node_part[i] = (M->flags[i] & NS_NODE_ALIVE) ? part[i] : -1;
     } else

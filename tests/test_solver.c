@@ -484,7 +484,7 @@ static int single_precision_preconditioner(void)
     ns_solver_set_threads(s, 2);
     ENSURE(ns_solver_precondition(s, n3, b, z2) == 0);
     ENSURE(memcmp(z1, z2, (size_t)n3 * sizeof *z1) == 0);
-    /* The two threads had work each: both bins hold whole subtrees, of comparable size, and the
+    /* The cut gives each thread work: both bins are non-empty and of comparable size, and the
      * top (the last separators) is a part of the factor, not all of it. */
     size_t cut[3];
     ENSURE(ns_solver_precondition_cut(s, cut) == 0);
