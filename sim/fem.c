@@ -239,13 +239,13 @@ static void damping_forces(const NsTetRest *r, const NsFemMaterial *mat, const N
     add_forces(r, g, Pd, f);
 }
 
-static void tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
-                       const double *const v[4], double f[12], NsTetFrame *frame, int warm)
+void ns_fem_tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
+                       const double *const v[4], double f[12], NsTetFrame *frame)
 {
     double g[12], F[9], Ph[9] = {0}, P[9], ps[3];
     shape_gradients(r, g);
     gradient_of(g, x, F);
-    ns_svd3_from(F, warm ? frame->V : NULL, frame->U, frame->s, frame->V);
+    ns_svd3(F, frame->U, frame->s, frame->V);
     diag_stress(mat, frame->s, ps);
     Ph[0] = ps[0];
     Ph[4] = ps[1];
@@ -254,18 +254,6 @@ static void tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const doubl
     memset(f, 0, 12 * sizeof(double));
     add_forces(r, g, P, f);
     damping_forces(r, mat, frame, g, v, f);
-}
-
-void ns_fem_tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
-                       const double *const v[4], double f[12], NsTetFrame *frame)
-{
-    tet_forces(r, mat, x, v, f, frame, 0);
-}
-
-void ns_fem_tet_forces_warm(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
-                            const double *const v[4], double f[12], NsTetFrame *frame)
-{
-    tet_forces(r, mat, x, v, f, frame, 1);
 }
 
 static void inverse3(const double *M, double *out)

@@ -50,11 +50,6 @@ typedef struct NsTetFrame {
 void ns_fem_tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
                        const double *const v[4], double f[12], NsTetFrame *frame);
 
-/* The same, the SVD's eigen-solve warm-started from frame->V, which holds the tet's frame of
- * the last evaluation (or zeros, or any rotation: see ns_svd3_from). Same forces to round-off. */
-void ns_fem_tet_forces_warm(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
-                            const double *const v[4], double f[12], NsTetFrame *frame);
-
 /* The same forces with a given frame held fixed (U, V from frame; the model's stress is
  * evaluated on U^T F V as a full matrix). Used to check the Jacobians by finite differences. */
 void ns_fem_tet_forces_fixed_frame(const NsTetRest *r, const NsFemMaterial *mat,

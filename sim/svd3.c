@@ -8,11 +8,11 @@
 #include "svd3.h"
 
 #include <math.h>
-#include <stddef.h>
 
-/* Cyclic Jacobi on A, accumulating the rotations into V (V <- V J per rotation). */
-static void jacobi(double A[9], double V[9])
+void ns_sym3_eigen(double A[9], double V[9])
 {
+    for (int i = 0; i < 9; i++)
+        V[i] = (i % 4 == 0) ? 1.0 : 0.0;
     for (int sweep = 0; sweep < 30; sweep++) {
         double off = A[1] * A[1] + A[2] * A[2] + A[5] * A[5];
         double diag = A[0] * A[0] + A[4] * A[4] + A[8] * A[8];
@@ -47,29 +47,6 @@ static void jacobi(double A[9], double V[9])
     }
 }
 
-void ns_sym3_eigen(double A[9], double V[9])
-{
-    for (int i = 0; i < 9; i++)
-        V[i] = (i % 4 == 0) ? 1.0 : 0.0;
-    jacobi(A, V);
-}
-
-/* Whether V0 is a rotation to within 1e-12 (a usable starting basis: V0^T A V0 is then A's
- * similarity transform to round-off; a V passed back step after step, which drifts by a few ulp
- * a step, is started from I again when it has drifted that far). */
-static int is_rotation(const double V0[9])
-{
-    for (int i = 0; i < 3; i++)
-        for (int j = i; j < 3; j++) {
-            double d = V0[i] * V0[j] + V0[3 + i] * V0[3 + j] + V0[6 + i] * V0[6 + j];
-            if (!(fabs(d - (i == j)) <= 1e-12))
-                return 0;
-        }
-    double det = V0[0] * (V0[4] * V0[8] - V0[5] * V0[7]) - V0[1] * (V0[3] * V0[8] - V0[5] * V0[6]) +
-                 V0[2] * (V0[3] * V0[7] - V0[4] * V0[6]);
-    return det > 0.0;
-}
-
 static double norm3(const double *v)
 {
     return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
@@ -95,32 +72,13 @@ static void any_orthogonal(const double *a, double *out)
         out[i] /= n;
 }
 
-void ns_svd3_from(const double F[9], const double *V0, double U[9], double s[3], double V[9])
+void ns_svd3(const double F[9], double U[9], double s[3], double V[9])
 {
     double A[9];
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++)
             A[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j];
-    if (V0 && is_rotation(V0)) {
-        /* Warm start: Jacobi on V0^T (F^T F) V0, nearly diagonal when V0 is last step's V, so
-         * about two sweeps instead of three or four; V = V0 J. */
-        double B[9];
-        for (int i = 0; i < 3; i++)
-            for (int j = 0; j < 3; j++)
-                B[3 * i + j] =
-                    A[3 * i + 0] * V0[j] + A[3 * i + 1] * V0[3 + j] + A[3 * i + 2] * V0[6 + j];
-        for (int i = 0; i < 3; i++)
-            for (int j = 0; j < 3; j++)
-                A[3 * i + j] = V0[i] * B[j] + V0[3 + i] * B[3 + j] + V0[6 + i] * B[6 + j];
-        A[3] = A[1]; /* exactly symmetric */
-        A[6] = A[2];
-        A[7] = A[5];
-        for (int i = 0; i < 9; i++)
-            V[i] = V0[i];
-        jacobi(A, V);
-    } else {
-        ns_sym3_eigen(A, V);
-    }
+    ns_sym3_eigen(A, V);
     double lam[3] = {A[0], A[4], A[8]};
     /* Sort eigenpairs in decreasing order (columns of V move with them). */
     for (int i = 0; i < 2; i++)
@@ -179,9 +137,4 @@ void ns_svd3_from(const double F[9], const double *V0, double U[9], double s[3],
     s[0] = u0[0] * B[0] + u0[1] * B[3] + u0[2] * B[6];
     s[1] = u1[0] * B[1] + u1[1] * B[4] + u1[2] * B[7];
     s[2] = u2[0] * B[2] + u2[1] * B[5] + u2[2] * B[8];
-}
-
-void ns_svd3(const double F[9], double U[9], double s[3], double V[9])
-{
-    ns_svd3_from(F, NULL, U, s, V);
 }

@@ -12,9 +12,4 @@ void ns_sym3_eigen(double A[9], double V[9]);
 
 void ns_svd3(const double F[9], double U[9], double s[3], double V[9]);
 
-/* The same decomposition, the eigen-solve started from the basis V0 (a rotation: typically the
- * element's V of the last step; NULL, or anything not a rotation to 1e-12, starts from I). The
- * result agrees with ns_svd3's to round-off; the rotations it needs are fewer. V0 may be V. */
-void ns_svd3_from(const double F[9], const double *V0, double U[9], double s[3], double V[9]);
-
 #endif

@@ -534,7 +534,7 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
     }
     const NsTissueMaterial *mat = &t->materials[M->tet_region[e]];
     double *f = t->tet_force + 12 * (size_t)e;
-    ns_fem_tet_forces_warm(&t->rest[e], &mat->fem, x, v, f, &t->frame[e]);
+    ns_fem_tet_forces(&t->rest[e], &mat->fem, x, v, f, &t->frame[e]);
     for (int k = 0; k < 12; k++)
         if (!isfinite(f[k])) {
             c->nan++;

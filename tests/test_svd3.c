@@ -12,10 +12,10 @@ static double det3(const double *M)
 }
 
 /* Checks every property of one decomposition; returns 0 or 1 (with a message). */
-static int check_from(const double F[9], const double *V0, double rel_tol)
+static int check(const double F[9], double rel_tol)
 {
     double U[9], s[3], V[9];
-    ns_svd3_from(F, V0, U, s, V);
+    ns_svd3(F, U, s, V);
     double fnorm = 0.0;
     for (int i = 0; i < 9; i++)
         fnorm += F[i] * F[i];
@@ -44,11 +44,6 @@ static int check_from(const double F[9], const double *V0, double rel_tol)
     if (fabs(d) > 1e-9 * scale * scale * scale)
         ENSURE((d < 0) == (s[2] < 0));
     return 0;
-}
-
-static int check(const double F[9], double rel_tol)
-{
-    return check_from(F, NULL, rel_tol);
 }
 
 static double rnd(uint64_t *st)
@@ -131,61 +126,5 @@ static int near_degenerate(void)
     return 0;
 }
 
-/* Warm starts (ns_svd3_from): from the V of a nearby matrix (a tet's last step), from an
- * unrelated rotation, from zeros and from a non-rotation (both fall back to I), the same
- * decomposition as a cold start: every property holds, the same s and R = U V^T to round-off. */
-static int warm_start(void)
-{
-    uint64_t st = 3;
-    for (int n = 0; n < 20000; n++) {
-        double F[9], G[9], F2[9];
-        for (int i = 0; i < 9; i++) {
-            F[i] = (i % 4 == 0) + 0.3 * rnd(&st);
-            G[i] = rnd(&st);
-        }
-        double step = n % 2 ? 1e-3 : 1e-1;
-        for (int i = 0; i < 9; i++)
-            F2[i] = F[i] + step * rnd(&st);
-        double U[9], s[3], V[9], Ug[9], sg[3], Vg[9];
-        ns_svd3(F, U, s, V);
-        ns_svd3(G, Ug, sg, Vg);
-        double zero[9] = {0}, scaled[9];
-        for (int i = 0; i < 9; i++)
-            scaled[i] = 2.0 * V[i];
-        const double *starts[4] = {V, Vg, zero, scaled};
-        double Uc[9], sc[3], Vc[9];
-        ns_svd3(F2, Uc, sc, Vc);
-        for (int k = 0; k < 4; k++) {
-            if (check_from(F2, starts[k], 1e-12))
-                return 1;
-            double Uw[9], sw[3], Vw[9];
-            ns_svd3_from(F2, starts[k], Uw, sw, Vw);
-            for (int i = 0; i < 3; i++)
-                ENSURE_SMALL(sw[i] - sc[i], 1e-12 * (1.0 + fabs(sc[0])));
-            if (fabs(sc[0] - sc[1]) > 1e-6 && fabs(sc[1] - fabs(sc[2])) > 1e-6 && sc[2] > 1e-6)
-                for (int i = 0; i < 3; i++)
-                    for (int j = 0; j < 3; j++) {
-                        double rw = 0.0, rc = 0.0;
-                        for (int q = 0; q < 3; q++) {
-                            rw += Uw[3 * i + q] * Vw[3 * j + q];
-                            rc += Uc[3 * i + q] * Vc[3 * j + q];
-                        }
-                        ENSURE_SMALL(rw - rc, 1e-9);
-                    }
-        }
-        /* V may be passed as its own starting basis. */
-        double Vi[9];
-        for (int i = 0; i < 9; i++)
-            Vi[i] = V[i];
-        ns_svd3_from(F2, Vi, U, s, Vi);
-        for (int i = 0; i < 3; i++)
-            ENSURE_SMALL(s[i] - sc[i], 1e-12 * (1.0 + fabs(sc[0])));
-    }
-    double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, R[9] = {-1, 0, 0, 0, -1, 0, 0, 0, -1};
-    ENSURE(check_from(R, I, 1e-13) == 0);
-    ENSURE(check_from(I, I, 1e-14) == 0);
-    return 0;
-}
-
 NS_TEST_MAIN({"random_matrices", random_matrices}, {"reflections", reflections},
-             {"near_degenerate", near_degenerate}, {"warm_start", warm_start})
+             {"near_degenerate", near_degenerate})
