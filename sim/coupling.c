@@ -1088,6 +1088,21 @@ static int scale_start(CoupledSystem *S)
     return 0;
 }
 
+/* A step that fails after the needle's step began: the message, the step's scratch freed, the
+ * needle's step undone, the statistics so far reported. Returns -1. */
+static int step_failed(NsCoupled *c, const char *msg, int *iw, uint8_t *sw, NsCouplingStats *st,
+                       double t0, NsCouplingStats *stats)
+{
+    snprintf(c->error, sizeof c->error, "%s", msg);
+    free(iw);
+    free(sw);
+    ns_rod_abort_step(c->rod);
+    st->total_ms = now_ms() - t0;
+    if (stats)
+        *stats = *st;
+    return -1;
+}
+
 int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
                     NsCouplingStats *stats)
 {
@@ -1127,14 +1142,9 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     double *bt = ns_tissue_begin_step(T, dt, bev_t ? bev_t : ext_tissue, &ts);
     free(bev_t);
     free(bev_r);
-    if (!bt) {
-        snprintf(c->error, sizeof c->error, "out of memory assembling the tissue matrix");
-        ns_rod_abort_step(r);
-        st.total_ms = now_ms() - t0;
-        if (stats)
-            *stats = st;
-        return -1;
-    }
+    if (!bt)
+        return step_failed(c, "out of memory assembling the tissue matrix", NULL, NULL, &st, t0,
+                           stats);
     st.tissue_ms = now_ms() - tt;
     double tl = now_ms();
 
@@ -1163,16 +1173,8 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     double *w = scratch(c, need);
     int *iw = malloc((size_t)(3 * q + 1) * sizeof *iw);
     uint8_t *sw = malloc((size_t)q + 1);
-    if (!w || !iw || !sw) {
-        snprintf(c->error, sizeof c->error, "out of memory");
-        free(iw);
-        free(sw);
-        ns_rod_abort_step(r);
-        st.total_ms = now_ms() - t0;
-        if (stats)
-            *stats = st;
-        return -1;
-    }
+    if (!w || !iw || !sw)
+        return step_failed(c, "out of memory", iw, sw, &st, t0, stats);
     S.tw = w;
     S.R = S.tw + q;
     S.f = S.R + 9 * q;
@@ -1244,16 +1246,8 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
     }
     for (int i = 0; i < S.nt3; i++)
         S.at[i] = T->dof_fixed[i] ? 0.0 : M->a[i];
-    if (scale_start(&S)) {
-        snprintf(c->error, sizeof c->error, "out of memory");
-        free(iw);
-        free(sw);
-        ns_rod_abort_step(r);
-        st.total_ms = now_ms() - t0;
-        if (stats)
-            *stats = st;
-        return -1;
-    }
+    if (scale_start(&S))
+        return step_failed(c, "out of memory", iw, sw, &st, t0, stats);
     for (int k = 0; k < q; k++)
         for (int d = 0; d < 3; d++)
             S.cf[3 * k + d] = d == 0 ? coupled_known_force(&S, k, S.st[k]) : 0.0;
@@ -1272,17 +1266,12 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
         finite = isfinite(S.ar[i]);
     st.lcp_ms = now_ms() - tl;
     if (!finite) {
-        snprintf(c->error, sizeof c->error, "%s",
-                 rc == 0 ? "the coupled solve gave non-finite accelerations"
-                         : "the coupled solve failed (its linear solves did not complete)");
         st.nan_count += rc == 0;
-        ns_rod_abort_step(r);
-        free(iw);
-        free(sw);
-        st.total_ms = now_ms() - t0;
-        if (stats)
-            *stats = st;
-        return -1;
+        return step_failed(c,
+                           rc == 0
+                               ? "the coupled solve gave non-finite accelerations"
+                               : "the coupled solve failed (its linear solves did not complete)",
+                           iw, sw, &st, t0, stats);
     }
     st.coupled = q;
     for (int k = 0; k < q; k++) {

@@ -322,6 +322,25 @@ static int tet_part(const int *part, const int *tn)
 
 #define NS_TISSUE_MAX_PARTS 64 /* partitions with more parts are always made by METIS */
 
+/* The part most of node i's neighbours by tet had in the last partition (its first old slots),
+ * ties to the lowest; 0 with none. */
+static int neighbour_part(const NsTissue *t, int i, int parts, int old)
+{
+    const NsMesh *M = &t->mesh;
+    const NsIntList *l = &M->node_tets[i];
+    int count[NS_TISSUE_MAX_PARTS] = {0}, p = 0;
+    for (int q = 0; q < l->count; q++)
+        for (int b = 0; b < 4; b++) {
+            int j = M->tet_node[4 * l->items[q] + b];
+            if (j != i && j < old && t->node_part[j] >= 0 && t->node_part[j] < parts)
+                count[t->node_part[j]]++;
+        }
+    for (int k = 1; k < parts; k++)
+        if (count[k] > count[p])
+            p = k;
+    return p;
+}
+
 /* The last partition, patched for a changed mesh into part (node slots): nodes keep their
  * part; a node slot with none (new, or beyond the last partition) takes the part most of its
  * neighbours by tet have, else part 0. The caller checks that the last partition had this many
@@ -339,21 +358,8 @@ static int patch_partition(NsTissue *t, int parts, int *part)
         return -1;
     for (int i = 0; i < nn; i++) {
         int p = i < old ? t->node_part[i] : -1;
-        if (p < 0 || p >= parts) {
-            int count[NS_TISSUE_MAX_PARTS] = {0};
-            const NsIntList *l = &M->node_tets[i];
-            for (int q = 0; q < l->count; q++)
-                for (int b = 0; b < 4; b++) {
-                    int j = M->tet_node[4 * l->items[q] + b];
-                    if (j != i && j < old && t->node_part[j] >= 0 && t->node_part[j] < parts)
-                        count[t->node_part[j]]++;
-                }
-            p = 0;
-            for (int k = 1; k < parts; k++)
-                if (count[k] > count[p])
-                    p = k;
-        }
-        part[i] = p;
+        part[i] = p >= 0 && p < parts ? p : neighbour_part(t, i, parts, old);
+        p = part[i];
         if (M->flags[i] & NS_NODE_ALIVE) {
             weight[p] += M->node_tets[i].count;
             total += M->node_tets[i].count;
@@ -401,17 +407,17 @@ static int partition(NsTissue *t, int parts)
     }
     for (size_t k = 0; k < (size_t)parts * ncol; k++)
         cp[k] = -1;
-    /* Contiguous ranges of node indices: the answer for one part, and the fallback. */
-    for (int i = 0; i < nn; i++)
-        part[i] = (int)((int64_t)i * parts / nn);
-
     /* After a remeshing step the last partition is patched rather than made again: METIS took
      * ~0.4 ms a call on one thread, in ~70 % of the brachytherapy steps. */
-    if (parts > 1 && prev_parts == parts && patch_partition(t, parts, part) == 0) {
+    int patched = parts > 1 && prev_parts == parts && patch_partition(t, parts, part) == 0;
+    /* Otherwise contiguous ranges of node indices: the answer for one part, and the fallback
+     * (over whatever a rejected patch wrote). */
+    if (!patched)
+        for (int i = 0; i < nn; i++)
+            part[i] = (int)((int64_t)i * parts / nn);
+    if (patched) {
         t->part_metis_age++;
     } else if (parts > 1) {
-        for (int i = 0; i < nn; i++) /* a rejected patch may have written part */
-            part[i] = (int)((int64_t)i * parts / nn);
         /* The graph of alive nodes (compacted) joined by tet edges; vertex weight = incident
          * tets, which is what phase 1 costs per node once tets go to their nodes' part. */
         idx_t nv = 0, ncon = 1, np = parts, cut = 0;
