@@ -239,13 +239,27 @@ static void damping_forces(const NsTetRest *r, const NsFemMaterial *mat, const N
     add_forces(r, g, Pd, f);
 }
 
+void ns_fem_tet_gradient(const NsTetRest *r, const double *const x[4], double F[9])
+{
+    double g[12];
+    shape_gradients(r, g);
+    gradient_of(g, x, F);
+}
+
 void ns_fem_tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
                        const double *const v[4], double f[12], NsTetFrame *frame)
 {
-    double g[12], F[9], Ph[9] = {0}, P[9], ps[3];
-    shape_gradients(r, g);
-    gradient_of(g, x, F);
+    double F[9];
+    ns_fem_tet_gradient(r, x, F);
     ns_svd3(F, frame->U, frame->s, frame->V);
+    ns_fem_tet_forces_svd(r, mat, v, f, frame);
+}
+
+void ns_fem_tet_forces_svd(const NsTetRest *r, const NsFemMaterial *mat, const double *const v[4],
+                           double f[12], const NsTetFrame *frame)
+{
+    double g[12], Ph[9] = {0}, P[9], ps[3];
+    shape_gradients(r, g);
     diag_stress(mat, frame->s, ps);
     Ph[0] = ps[0];
     Ph[4] = ps[1];

@@ -50,6 +50,13 @@ typedef struct NsTetFrame {
 void ns_fem_tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4],
                        const double *const v[4], double f[12], NsTetFrame *frame);
 
+/* ns_fem_tet_forces in two parts, for callers that decompose many tets' F at once
+ * (ns_svd3_n): the deformation gradient F at positions x, then the forces given frame = the
+ * SVD of that F. The same bits as ns_fem_tet_forces. */
+void ns_fem_tet_gradient(const NsTetRest *r, const double *const x[4], double F[9]);
+void ns_fem_tet_forces_svd(const NsTetRest *r, const NsFemMaterial *mat, const double *const v[4],
+                           double f[12], const NsTetFrame *frame);
+
 /* The same forces with a given frame held fixed (U, V from frame; the model's stress is
  * evaluated on U^T F V as a full matrix). Used to check the Jacobians by finite differences. */
 void ns_fem_tet_forces_fixed_frame(const NsTetRest *r, const NsFemMaterial *mat,

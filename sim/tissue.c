@@ -4,6 +4,7 @@
 
 #include "err.h"
 #include "ns_config.h"
+#include "svd3.h"
 
 #include <math.h>
 #include <metis.h>
@@ -533,14 +534,12 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
 {
     const NsMesh *M = &t->mesh;
     const int *tn = M->tet_node + 4 * e;
-    const double *x[4], *v[4];
-    for (int k = 0; k < 4; k++) {
-        x[k] = M->x + 3 * tn[k];
+    const double *v[4];
+    for (int k = 0; k < 4; k++)
         v[k] = M->v + 3 * tn[k];
-    }
     const NsTissueMaterial *mat = &t->materials[M->tet_region[e]];
     double *f = t->tet_force + 12 * (size_t)e;
-    ns_fem_tet_forces(&t->rest[e], &mat->fem, x, v, f, &t->frame[e]);
+    ns_fem_tet_forces_svd(&t->rest[e], &mat->fem, v, f, &t->frame[e]);
     for (int k = 0; k < 12; k++)
         if (!isfinite(f[k])) {
             c->nan++;
@@ -561,6 +560,35 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
         t->jnew[e] = 1;
         c->updated++;
         c->jacobian_ms += now_ms() - tj0;
+    }
+}
+
+/* Phase 1 for the tets es[0..n): their deformation gradients' SVDs (§3.2) in batches of
+ * SVD_BATCH (ns_svd3_n: the same bits as one at a time, several at once on vector lanes), then
+ * each tet's forces and, when due, Jacobians (tet_phase). */
+#define SVD_BATCH 8
+static void tet_phase_n(NsTissue *t, const int *es, int n, AssemblyCounts *c)
+{
+    const NsMesh *M = &t->mesh;
+    for (int k0 = 0; k0 < n; k0 += SVD_BATCH) {
+        int m = n - k0 < SVD_BATCH ? n - k0 : SVD_BATCH;
+        double F[SVD_BATCH][9];
+        const double *Fp[SVD_BATCH];
+        double *U[SVD_BATCH], *s[SVD_BATCH], *V[SVD_BATCH];
+        for (int k = 0; k < m; k++) {
+            int e = es[k0 + k];
+            const int *tn = M->tet_node + 4 * e;
+            const double *x[4] = {M->x + 3 * tn[0], M->x + 3 * tn[1], M->x + 3 * tn[2],
+                                  M->x + 3 * tn[3]};
+            ns_fem_tet_gradient(&t->rest[e], x, F[k]);
+            Fp[k] = F[k];
+            U[k] = t->frame[e].U;
+            s[k] = t->frame[e].s;
+            V[k] = t->frame[e].V;
+        }
+        ns_svd3_n(m, Fp, U, s, V);
+        for (int k = 0; k < m; k++)
+            tet_phase(t, es[k0 + k], c);
     }
 }
 
@@ -694,9 +722,16 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
     double tj = 0.0;
     if (parts == 0) { /* no memory for the partition: the same work, serially by index */
         AssemblyCounts c = {0};
+        int batch[SVD_BATCH], nb = 0;
         for (int e = 0; e < M->tet_slots; e++)
-            if (ns_mesh_tet_alive(M, e))
-                tet_phase(t, e, &c);
+            if (ns_mesh_tet_alive(M, e)) {
+                batch[nb++] = e;
+                if (nb == SVD_BATCH) {
+                    tet_phase_n(t, batch, nb, &c);
+                    nb = 0;
+                }
+            }
+        tet_phase_n(t, batch, nb, &c);
         double tr = now_ms();
         for (int i = 0; i < M->node_slots; i++)
             node_force(t, i);
@@ -721,8 +756,8 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
             /* OpenMP may give fewer threads than parts: each thread takes every nth part. */
             AssemblyCounts c = {0};
             for (int p = tid; p < parts; p += nth)
-                for (int k = t->part_tet_start[p]; k < t->part_tet_start[p + 1]; k++)
-                    tet_phase(t, t->part_tets[k], &c);
+                tet_phase_n(t, t->part_tets + t->part_tet_start[p],
+                            t->part_tet_start[p + 1] - t->part_tet_start[p], &c);
 #if NS_HAVE_OPENMP
 #pragma omp barrier
 #endif

@@ -4,6 +4,8 @@
 #include "ns_test.h"
 
 #include <stdint.h>
+#include <stdio.h>
+#include <string.h>
 
 static double det3(const double *M)
 {
@@ -126,5 +128,69 @@ static int near_degenerate(void)
     return 0;
 }
 
+/* ns_svd3_n gives ns_svd3's bits for every matrix of a batch, whatever its lane: random
+ * matrices at scales from 1e-8 to 1e16 (a sliver's Jacobian entries reach ~1e17), rank-deficient,
+ * reflected, diagonal (no rotation at all), and non-finite ones, in batches of 1 to 9. */
+static int batch_matches_single(void)
+{
+    enum { COUNT = 4000 };
+    static double F[COUNT][9], U[COUNT][9], s[COUNT][3], V[COUNT][9];
+    uint64_t st = 2024;
+    for (int n = 0; n < COUNT; n++) {
+        double scale = pow(10.0, -8.0 + 24.0 * (0.5 + 0.5 * rnd(&st)));
+        for (int i = 0; i < 9; i++)
+            F[n][i] = scale * rnd(&st);
+        switch (n % 13) {
+        case 1: /* rank 1 */
+            for (int i = 0; i < 3; i++)
+                F[n][3 * i + 1] = 2.0 * F[n][3 * i], F[n][3 * i + 2] = -F[n][3 * i];
+            break;
+        case 2: /* diagonal: nothing to rotate */
+            for (int i = 0; i < 9; i++)
+                F[n][i] = i % 4 ? 0.0 : F[n][i];
+            break;
+        case 3: /* nearly the identity, as most tets at rest */
+            for (int i = 0; i < 9; i++)
+                F[n][i] = (i % 4 == 0) + 1e-9 * F[n][i] / scale;
+            break;
+        case 4:
+            memset(F[n], 0, sizeof F[n]);
+            break;
+        case 5:
+            F[n][4] = NAN;
+            break;
+        case 6:
+            F[n][7] = INFINITY;
+            break;
+        default:
+            break;
+        }
+    }
+    int done = 0;
+    for (int batch = 1; done < COUNT; batch = batch % 9 + 1) {
+        int m = COUNT - done < batch ? COUNT - done : batch;
+        const double *Fp[9];
+        double *Up[9], *sp[9], *Vp[9];
+        for (int k = 0; k < m; k++) {
+            Fp[k] = F[done + k];
+            Up[k] = U[done + k];
+            sp[k] = s[done + k];
+            Vp[k] = V[done + k];
+        }
+        ns_svd3_n(m, Fp, Up, sp, Vp);
+        done += m;
+    }
+    for (int n = 0; n < COUNT; n++) {
+        double U1[9], s1[3], V1[9];
+        ns_svd3(F[n], U1, s1, V1);
+        if (memcmp(U1, U[n], sizeof U1) || memcmp(s1, s[n], sizeof s1) ||
+            memcmp(V1, V[n], sizeof V1)) {
+            fprintf(stderr, "matrix %d: the batch's decomposition differs from ns_svd3's\n", n);
+            return 1;
+        }
+    }
+    return 0;
+}
+
 NS_TEST_MAIN({"random_matrices", random_matrices}, {"reflections", reflections},
-             {"near_degenerate", near_degenerate})
+             {"near_degenerate", near_degenerate}, {"batch_matches_single", batch_matches_single})
