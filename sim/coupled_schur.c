@@ -26,6 +26,7 @@
  * SI units; the stale factor and the predictions affect only how fast the solve converges and
  * which configurations are tried, never the tolerance of the accepted solution. */
 #include "coupling_internal.h"
+#include "ns_config.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -56,6 +57,10 @@ struct CoupledSchur {
     int act_cap;
     double *vec; /* 5 vectors of nt3 + nr3 */
     size_t vec_cap;
+    /* add_response's terms: up to 6q cached columns and their scales */
+    const double **term_col;
+    double *term_s;
+    int term_cap;
     int refreshed; /* refactored in this step */
     /* A refactorization scheduled at the end of a step (on the second core with 2 threads) and
      * adopted at the start of the next, with the columns of the nodes coupled then. */
@@ -88,6 +93,8 @@ void coupled_schur_destroy(CoupledSchur *w)
     free(w->buf);
     free(w->act);
     free(w->vec);
+    free(w->term_col);
+    free(w->term_s);
     free(w->fixed);
     free(w->job_node);
     free(w->job_B);
@@ -314,6 +321,17 @@ static int ensure_buf(CoupledSchur *w, const CoupledSystem *S)
     w->L = w->C + q3 * q3;
     w->sc = w->L + q3 * q3;
     w->small = w->sc + n; /* 8 vectors of 3q */
+    if (6 * (int)S->q + 1 > w->term_cap) {
+        int cap = 6 * (int)S->q + 1;
+        const double **c = realloc(w->term_col, (size_t)cap * sizeof *c);
+        if (c)
+            w->term_col = c;
+        double *ts = c ? realloc(w->term_s, (size_t)cap * sizeof *ts) : NULL;
+        if (!ts)
+            return -1;
+        w->term_s = ts;
+        w->term_cap = cap;
+    }
     if (5 * n > w->vec_cap) {
         double *v = realloc(w->vec, 5 * n * sizeof *v);
         if (!v)
@@ -484,11 +502,14 @@ static void add_bt(const CoupledSystem *S, const double *lam, double s, double *
     }
 }
 
-/* The response to forces lam (3q, on the needle): xt -= F^-1 G_t lam, xn += A_n^-1 G_n lam. */
+/* The response to forces lam (3q, on the needle): xt -= F^-1 G_t lam, xn += A_n^-1 G_n lam. The
+ * tissue part is a sum of up to 6q cached columns, each a dense nt3-vector (F^-1 is dense), so
+ * it reads megabytes: it is split by rows over the threads, each entry's terms subtracted in the
+ * same order whatever the split (the same bits on any thread count). */
 static void add_response(const CoupledSchur *w, const CoupledSystem *S, const double *lam,
                          double *xt, double *xn)
 {
-    int nt3 = S->nt3, nr3 = S->nr3;
+    int nt3 = S->nt3, nr3 = S->nr3, nterm = 0;
     for (int k = 0; k < S->q; k++) {
         double g[3] = {0, 0, 0};
         for (int col = 0; col < 3; col++)
@@ -503,11 +524,27 @@ static void add_response(const CoupledSchur *w, const CoupledSystem *S, const do
                 continue;
             const double *col = w->cols + (size_t)w->slot[a] * 3 * (size_t)nt3;
             for (int d = 0; d < 3; d++) {
-                double s = wt * g[d];
-                const double *cd = col + (size_t)d * (size_t)nt3;
-                for (int i = 0; i < nt3; i++)
-                    xt[i] -= s * cd[i];
+                w->term_col[nterm] = col + (size_t)d * (size_t)nt3;
+                w->term_s[nterm++] = wt * g[d];
             }
+        }
+    }
+    const double *const *tc = w->term_col;
+    const double *ts = w->term_s;
+    int chunks = 1;
+#if NS_HAVE_OPENMP
+    /* Below ~100k terms x entries the fork costs more than it saves. */
+    if (S->threads > 1 && (double)nterm * nt3 >= 1e5)
+        chunks = S->threads;
+#pragma omp parallel for num_threads(chunks) schedule(static) if (chunks > 1)
+#endif
+    for (int part = 0; part < chunks; part++) {
+        int i0 = (int)((long)nt3 * part / chunks), i1 = (int)((long)nt3 * (part + 1) / chunks);
+        for (int m = 0; m < nterm; m++) {
+            const double *cd = tc[m];
+            double s = ts[m];
+            for (int i = i0; i < i1; i++)
+                xt[i] -= s * cd[i];
         }
     }
     for (int j = 0; j < 3 * S->q; j++) {
