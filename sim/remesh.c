@@ -425,6 +425,31 @@ static void node_restore(NsMesh *m, const NodeSave *s)
         set_node(m, s->n, s->u, s->x, s->v, s->a);
 }
 
+/* The searches below ask of a trial position only whether node n's worst tet quality beats
+ * the best so far. So the scan of its tets stops at the first tet at or below cut, and returns
+ * that tet's quality (which answers the question as the full minimum would); above cut it is
+ * the full minimum, ns_remesh_node_quality's value. It starts at the tet that was worst at the
+ * last call with the same *hint, which rarely changes while one node moves, so a rejected
+ * position usually costs one tet instead of twenty. A minimum does not depend on the order it
+ * is taken in, so every decision, and the mesh, are the same bits as with full scans. */
+static double node_quality_cut(const NsMesh *m, int n, double cut, int *hint)
+{
+    const NsIntList *l = &m->node_tets[n];
+    int count = l->count, start = *hint >= 0 && *hint < count ? *hint : 0;
+    double q = INFINITY;
+    for (int k = 0; k < count; k++) {
+        int i = start + k < count ? start + k : start + k - count;
+        double qi = tet_quality_of(m, m->tet_node + 4 * l->items[i]);
+        if (qi < q) { /* as fmin: a NaN quality is passed over */
+            q = qi;
+            *hint = i;
+        }
+        if (q <= cut)
+            break;
+    }
+    return q;
+}
+
 /* Moves node n to the point of segment [p (node pn), node b] that maximizes the worst quality of
  * its tets (16 samples, then golden-section refinement); its world state is interpolated along
  * the segment. */
@@ -449,10 +474,11 @@ static void reposition(NsMesh *m, int n, int pn, int b)
         }                                                                                          \
     } while (0)
     double best_s = 0.5, best_q = -INFINITY;
+    int hint = 0;
     for (int i = 1; i < 16; i++) {
         double sv = i / 16.0;
         AT(sv);
-        double q = ns_remesh_node_quality(m, n);
+        double q = node_quality_cut(m, n, best_q, &hint);
         if (q > best_q) {
             best_q = q;
             best_s = sv;
@@ -463,9 +489,11 @@ static void reposition(NsMesh *m, int n, int pn, int b)
     for (int it = 0; it < 12; it++) {
         double s1 = hi - g * (hi - lo), s2 = lo + g * (hi - lo);
         AT(s1);
-        double q1 = ns_remesh_node_quality(m, n);
+        double q1 = node_quality_cut(m, n, -INFINITY, &hint);
         AT(s2);
-        double q2 = ns_remesh_node_quality(m, n);
+        /* q2 matters only above q1 (then it is exact): at or below it, q1 >= q2 holds and q2
+         * cannot beat best_q, which q1 has reached. */
+        double q2 = node_quality_cut(m, n, q1, &hint);
         if (q1 > best_q) {
             best_q = q1;
             best_s = s1;
@@ -510,11 +538,12 @@ static void place_free(NsMesh *m, const NsRemeshStack *s, int n, int allow_bound
             }
         }
     h = 0.25 * h / ne; /* a quarter of the mean length of the node's edges */
-    double best = ns_remesh_node_quality(m, n), u0[3];
+    int hint = 0;
+    double best = node_quality_cut(m, n, -INFINITY, &hint), u0[3];
     memcpy(p, un, sizeof p);
     if (ns_remesh_original(s, n, u0)) {
         memcpy(un, u0, sizeof u0);
-        double q = ns_remesh_node_quality(m, n);
+        double q = node_quality_cut(m, n, best, &hint);
         if (q > best) {
             best = q;
             memcpy(p, u0, sizeof p);
@@ -526,7 +555,7 @@ static void place_free(NsMesh *m, const NsRemeshStack *s, int n, int allow_bound
         for (int d = 0; d < 6 && !improved; d++) {
             memcpy(un, p, sizeof p);
             un[d / 2] += d % 2 ? -h : h;
-            double q = ns_remesh_node_quality(m, n);
+            double q = node_quality_cut(m, n, best, &hint);
             if (q > best) {
                 best = q;
                 memcpy(p, un, sizeof p);
