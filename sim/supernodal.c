@@ -309,27 +309,21 @@ static inline Block block_of(const NsSuperFactor *f, int s)
 }
 
 /* Helpers inlined into each kernel variant. Both give sums in a fixed order. */
-typedef float v4f __attribute__((vector_size(16)));
-typedef double v4d __attribute__((vector_size(32)));
 
 /* sum a[i] t[i] over n terms: two 4-lane partial sums over blocks of 8, their lanes added
- * pairwise, then the tail one by one. */
+ * pairwise, then the tail one by one. Written lane by lane, which GCC turns into 4-wide vector
+ * code with one float-to-double conversion per four entries (its vector extensions converted
+ * the floats two at a time, with shuffles); the sums and their order are the same. */
 static inline __attribute__((always_inline)) double dot_fd(const float *a, const double *t, int n)
 {
-    v4d s0 = {0.0, 0.0, 0.0, 0.0}, s1 = s0;
+    double s0[4] = {0.0, 0.0, 0.0, 0.0}, s1[4] = {0.0, 0.0, 0.0, 0.0};
     int i = 0;
-    for (; i + 8 <= n; i += 8) {
-        v4f a0, a1;
-        v4d t0, t1;
-        memcpy(&a0, a + i, sizeof a0);
-        memcpy(&a1, a + i + 4, sizeof a1);
-        memcpy(&t0, t + i, sizeof t0);
-        memcpy(&t1, t + i + 4, sizeof t1);
-        s0 += __builtin_convertvector(a0, v4d) * t0;
-        s1 += __builtin_convertvector(a1, v4d) * t1;
-    }
-    v4d sv = s0 + s1;
-    double sum = (sv[0] + sv[1]) + (sv[2] + sv[3]);
+    for (; i + 8 <= n; i += 8)
+        for (int l = 0; l < 4; l++) {
+            s0[l] += (double)a[i + l] * t[i + l];
+            s1[l] += (double)a[i + 4 + l] * t[i + 4 + l];
+        }
+    double sum = ((s0[0] + s1[0]) + (s0[1] + s1[1])) + ((s0[2] + s1[2]) + (s0[3] + s1[3]));
     for (; i < n; i++)
         sum += (double)a[i] * t[i];
     return sum;
