@@ -17,6 +17,10 @@
 #include <omp.h>
 #endif
 
+/* Entries of a tet's Jacobian strip for one node: its three rows of dF/dx, then of dF/dv
+ * (NsTissue.tet_jac). */
+#define JAC_STRIP 72
+
 NsTissueParams ns_default_tissue_params(void)
 {
     NsTissueParams p;
@@ -552,9 +556,13 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
     if (!t->jvalid[e] ||
         jacobian_change(&t->frame[e], &t->jframe[e], neo) > t->params.lazy_threshold) {
         double tj0 = now_ms();
-        double *J = t->tet_jac + 288 * (size_t)e;
+        double K[144], D[144], *J = t->tet_jac + 288 * (size_t)e;
         ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e], needs_projection(&t->frame[e]),
-                             J, J + 144);
+                             K, D);
+        for (int a = 0; a < 4; a++) { /* node a's strips side by side: see JAC_STRIP */
+            memcpy(J + JAC_STRIP * a, K + 36 * a, 36 * sizeof(double));
+            memcpy(J + JAC_STRIP * a + 36, D + 36 * a, 36 * sizeof(double));
+        }
         t->jframe[e] = t->frame[e];
         t->jvalid[e] = 1;
         t->jnew[e] = 1;
@@ -623,11 +631,9 @@ static void prefetch_strip(const NsTissue *t, int e, int i)
 {
 #if defined(__GNUC__)
     const char *p = (const char *)(t->tet_jac + 288 * (size_t)e +
-                                   36 * local_index(t->mesh.tet_node + 4 * e, i));
-    for (int z = 0; z < 36 * (int)sizeof(double); z += 64) {
+                                   JAC_STRIP * local_index(t->mesh.tet_node + 4 * e, i));
+    for (int z = 0; z < JAC_STRIP * (int)sizeof(double); z += 64)
         __builtin_prefetch(p + z);
-        __builtin_prefetch(p + 144 * sizeof(double) + z);
-    }
 #else
     (void)t, (void)e, (void)i;
 #endif
@@ -683,7 +689,7 @@ static int node_rows(NsTissue *t, int i, int all_rows, int *colpos)
         int a = local_index(tn, i);
         if (q + 1 < n)
             prefetch_strip(t, l->items[q + 1], i);
-        const double *Ke = t->tet_jac + 288 * (size_t)e + 36 * a, *De = Ke + 144;
+        const double *Ke = t->tet_jac + 288 * (size_t)e + JAC_STRIP * a, *De = Ke + 36;
         if (fast) {
             for (int b = 0; b < 4; b++)
                 add_block(kr->val + 9 * colpos[tn[b]], dr->val + 9 * colpos[tn[b]], Ke + 3 * b,

@@ -68,8 +68,10 @@ typedef struct NsTissue {
     uint8_t *jvalid;    /* (tet_slots) 1 if tet_jac holds its Jacobians at jframe */
     uint8_t *jnew;      /* (tet_slots) 1 if its Jacobians were rebuilt by the last call */
     double *tet_force;  /* (tet_slots x 12) element forces of the last evaluation [N] */
-    /* (tet_slots x 288) the tet's element Jacobians at jframe, 12 x 12 row-major: dF/dx [N/m]
-     * in the first 144 entries, dF/dv [N s/m] in the next 144 */
+    /* (tet_slots x 288) the tet's element Jacobians at jframe, dF/dx [N/m] and dF/dv [N s/m],
+     * each 12 x 12 row-major, stored by node: for local node a, rows 3a..3a+2 of dF/dx (36
+     * entries) then the same rows of dF/dv, at 72 a (JAC_STRIP a). A block row of K and D
+     * reads one contiguous strip per tet. */
     double *tet_jac;
     double *mass;       /* (node_slots) lumped [kg] */
     double *force;      /* (3 node_slots) total force at the current state [N] */
