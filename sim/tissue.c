@@ -48,6 +48,7 @@ void ns_tissue_free(NsTissue *t)
     free(t->rest);
     free(t->frame);
     free(t->jframe);
+    free(t->jprod);
     free(t->jvalid);
     free(t->jnew);
     free(t->tet_force);
@@ -85,6 +86,7 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     t->rest = calloc((size_t)(nt > 0 ? nt : 1), sizeof *t->rest);
     t->frame = calloc((size_t)(nt > 0 ? nt : 1), sizeof *t->frame);
     t->jframe = calloc((size_t)(nt > 0 ? nt : 1), sizeof *t->jframe);
+    t->jprod = calloc((size_t)(nt > 0 ? nt : 1) * 9, sizeof(double));
     t->jvalid = calloc((size_t)(nt > 0 ? nt : 1), 1);
     t->jnew = calloc((size_t)(nt > 0 ? nt : 1), 1);
     t->tet_force = calloc((size_t)(nt > 0 ? nt : 1) * 12, sizeof(double));
@@ -96,9 +98,10 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     ns_bsm_init(&t->K);
     ns_bsm_init(&t->D);
     ns_bsm_init(&t->A);
-    if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jvalid || !t->jnew ||
-        !t->tet_force || !t->tet_jac || !t->mass || !t->force || !t->dof_fixed || !t->work ||
-        ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) || ns_bsm_resize(&t->A, nn)) {
+    if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jprod || !t->jvalid ||
+        !t->jnew || !t->tet_force || !t->tet_jac || !t->mass || !t->force || !t->dof_fixed ||
+        !t->work || ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) ||
+        ns_bsm_resize(&t->A, nn)) {
         ns_set_err(err, err_sz, "out of memory");
         ns_tissue_free(t);
         return -1;
@@ -181,6 +184,7 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
         if (grow_zero((void **)&t->rest, old, cap, sizeof *t->rest) ||
             grow_zero((void **)&t->frame, old, cap, sizeof *t->frame) ||
             grow_zero((void **)&t->jframe, old, cap, sizeof *t->jframe) ||
+            grow_zero((void **)&t->jprod, old, cap, 9 * sizeof(double)) ||
             grow_zero((void **)&t->jvalid, old, cap, 1) ||
             grow_zero((void **)&t->jnew, old, cap, 1) ||
             grow_zero((void **)&t->tet_force, old, cap, 12 * sizeof(double)) ||
@@ -272,14 +276,14 @@ static void frame_product(const NsTetFrame *f, int with_s, double out[9])
 
 /* How much the tet's Jacobian may have changed since it was built (§3.6.3): the largest change
  * of an entry of R = U V^T (all the corotational Jacobian depends on) or, for neo-Hookean, of
- * F = U S V^T. Unlike U and V alone, both are well defined when singular values repeat. */
-static double jacobian_change(const NsTetFrame *now, const NsTetFrame *then, int neohookean)
+ * F = U S V^T, against then, that product when it was built. Unlike U and V alone, both are
+ * well defined when singular values repeat. */
+static double jacobian_change(const NsTetFrame *now, const double then[9], int neohookean)
 {
-    double a[9], b[9], e = 0.0;
+    double a[9], e = 0.0;
     frame_product(now, neohookean, a);
-    frame_product(then, neohookean, b);
     for (int i = 0; i < 9; i++) {
-        double d = fabs(a[i] - b[i]);
+        double d = fabs(a[i] - then[i]);
         e = d > e ? d : e;
     }
     return e;
@@ -554,7 +558,7 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
     int neo = mat->fem.model == NS_MODEL_NEOHOOKEAN;
     t->jnew[e] = 0;
     if (!t->jvalid[e] ||
-        jacobian_change(&t->frame[e], &t->jframe[e], neo) > t->params.lazy_threshold) {
+        jacobian_change(&t->frame[e], t->jprod + 9 * (size_t)e, neo) > t->params.lazy_threshold) {
         double tj0 = now_ms();
         double K[144], D[144], *J = t->tet_jac + 288 * (size_t)e;
         ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e], needs_projection(&t->frame[e]),
@@ -564,6 +568,7 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
             memcpy(J + JAC_STRIP * a + 36, D + 36 * a, 36 * sizeof(double));
         }
         t->jframe[e] = t->frame[e];
+        frame_product(&t->frame[e], neo, t->jprod + 9 * (size_t)e);
         t->jvalid[e] = 1;
         t->jnew[e] = 1;
         c->updated++;

@@ -65,6 +65,8 @@ typedef struct NsTissue {
     NsTetRest *rest;             /* (tet_slots) */
     NsTetFrame *frame;           /* (tet_slots) frame of the last force evaluation */
     NsTetFrame *jframe; /* (tet_slots) frame the tet's Jacobian contribution was built from */
+    double *jprod;      /* (tet_slots x 9) R = U V^T of jframe (F = U S V^T for neo-Hookean): the
+                           lazy update's reference, kept rather than formed again every step */
     uint8_t *jvalid;    /* (tet_slots) 1 if tet_jac holds its Jacobians at jframe */
     uint8_t *jnew;      /* (tet_slots) 1 if its Jacobians were rebuilt by the last call */
     double *tet_force;  /* (tet_slots x 12) element forces of the last evaluation [N] */
