@@ -13,8 +13,8 @@ void ns_sym3_eigen(double A[9], double V[9]);
 void ns_svd3(const double F[9], double U[9], double s[3], double V[9]);
 
 /* ns_svd3 of n matrices F[k] into U[k], s[k], V[k]: the same results, bit for bit, as n calls
- * of ns_svd3. Where the CPU has AVX2 the Jacobi sweeps of eight matrices run at once, one per
- * vector lane, each lane stopping where ns_svd3 would. */
+ * of ns_svd3. Where the CPU has AVX2 the decompositions of eight matrices run at once, one per
+ * vector lane, each lane doing ns_svd3's operations and stopping where ns_svd3 would. */
 void ns_svd3_n(int n, const double *const F[], double *const U[], double *const s[],
                double *const V[]);
 
