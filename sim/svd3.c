@@ -261,9 +261,8 @@ __attribute__((target("avx2"), always_inline)) static inline __m256d blend(__m25
     return _mm256_blendv_pd(a, b, m);
 }
 
-__attribute__((target("avx2"))) static int finish4(const double *const F[4],
-                                                   const double *const A[4],
-                                                   const double *const W[4], double *const U[4],
+__attribute__((target("avx2"))) static int finish4(const double *const F[4], double *const A[4],
+                                                   double *const W[4], double *const U[4],
                                                    double *const S[4], double *const V[4])
 {
 #define LANE_LOAD(P, i) _mm256_set_pd((P)[3][i], (P)[2][i], (P)[1][i], (P)[0][i])
@@ -368,8 +367,7 @@ void ns_svd3_n(int n, const double *const F[], double *const U[], double *const 
             sym3_eigen_lanes(Ap, Wp);
             for (int g = 0; g < G; g++) {
                 int l0 = 4 * g;
-                int rest = finish4(Fl + l0, (const double *const *)Ap + l0,
-                                   (const double *const *)Wp + l0, Ul + l0, sl + l0, Vl + l0);
+                int rest = finish4(Fl + l0, Ap + l0, Wp + l0, Ul + l0, sl + l0, Vl + l0);
                 for (int l = l0; l < l0 + 4 && l < m; l++)
                     if (rest & (1 << (l - l0))) { /* U's rank-deficient fallback, scalar */
                         memcpy(V[k + l], W[l], sizeof W[l]);

@@ -639,6 +639,7 @@ static void prefetch_strip(const NsTissue *t, int e, int i)
                                    JAC_STRIP * local_index(t->mesh.tet_node + 4 * e, i));
     for (int z = 0; z < JAC_STRIP * (int)sizeof(double); z += 64)
         __builtin_prefetch(p + z);
+    __builtin_prefetch(p + JAC_STRIP * sizeof(double) - 1); /* the last line, if p is unaligned */
 #else
     (void)t, (void)e, (void)i;
 #endif
