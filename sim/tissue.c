@@ -275,15 +275,15 @@ static void frame_product(const NsTetFrame *f, int with_s, double out[9])
 }
 
 /* How much the tet's Jacobian may have changed since it was built (§3.6.3): the largest change
- * of an entry of R = U V^T (all the corotational Jacobian depends on) or, for neo-Hookean, of
- * F = U S V^T, against then, that product when it was built. Unlike U and V alone, both are
- * well defined when singular values repeat. */
-static double jacobian_change(const NsTetFrame *now, const double then[9], int neohookean)
+ * of an entry of now against then, each R = U V^T (all the corotational Jacobian depends on) or,
+ * for neo-Hookean, F = U S V^T (frame_product), now's of the current frame and then's of the
+ * frame the Jacobian was built from. Unlike U and V alone, both are well defined when singular
+ * values repeat. */
+static double jacobian_change(const double now[9], const double then[9])
 {
-    double a[9], e = 0.0;
-    frame_product(now, neohookean, a);
+    double e = 0.0;
     for (int i = 0; i < 9; i++) {
-        double d = fabs(a[i] - then[i]);
+        double d = fabs(now[i] - then[i]);
         e = d > e ? d : e;
     }
     return e;
@@ -303,8 +303,8 @@ static int needs_projection(const NsTetFrame *f)
  * several threads, with METIS keeping the threads' entries mostly apart. Floating-point sums
  * taken in a thread-dependent order would make the state depend on the thread count, so we
  * split the work in two phases with no shared accumulation at all:
- *   1. per tet: forces into tet_force, and for a stale tet its element K and D into tet_K and
- *      tet_D (kept between steps: the lazy update never has to rebuild an old contribution to
+ *   1. per tet: forces into tet_force, and for a stale tet its element K and D into tet_jac
+ *      (kept between steps: the lazy update never has to rebuild an old contribution to
  *      take it out again);
  *   2. per node: its force is the sum of its incident tets' force rows, and a block row of K
  *      and D touched by a rebuilt tet is zeroed and summed again from the incident tets.
@@ -555,10 +555,10 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
         }
     c->alive++;
     c->inverted += t->frame[e].s[2] <= 0.0;
-    int neo = mat->fem.model == NS_MODEL_NEOHOOKEAN;
+    double *jprod = t->jprod + 9 * (size_t)e, prod[9];
+    frame_product(&t->frame[e], mat->fem.model == NS_MODEL_NEOHOOKEAN, prod);
     t->jnew[e] = 0;
-    if (!t->jvalid[e] ||
-        jacobian_change(&t->frame[e], t->jprod + 9 * (size_t)e, neo) > t->params.lazy_threshold) {
+    if (!t->jvalid[e] || jacobian_change(prod, jprod) > t->params.lazy_threshold) {
         double tj0 = now_ms();
         double K[144], D[144], *J = t->tet_jac + 288 * (size_t)e;
         ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e], needs_projection(&t->frame[e]),
@@ -568,7 +568,7 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
             memcpy(J + JAC_STRIP * a + 36, D + 36 * a, 36 * sizeof(double));
         }
         t->jframe[e] = t->frame[e];
-        frame_product(&t->frame[e], neo, t->jprod + 9 * (size_t)e);
+        memcpy(jprod, prod, sizeof prod);
         t->jvalid[e] = 1;
         t->jnew[e] = 1;
         c->updated++;
