@@ -3,6 +3,7 @@
 
 #include "ns_config.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -14,6 +15,11 @@
 #define TOP 2
 /* Most expansions of the top part tried when cutting the tree. */
 #define MAX_EXPAND 64
+
+/* The substitutions' working precision (their vectors and sums), and its lanes in a 256-bit
+ * vector. */
+typedef float sreal;
+#define LANES 8
 
 struct NsSuperFactor {
     int n, nsuper;
@@ -29,7 +35,7 @@ struct NsSuperFactor {
     int *top_cols;            /* columns of the top part, ascending */
     int ntop_cols;
     /* Workspace: y (n), one accumulator (n) and one gather buffer (max_below) per bin. */
-    double *y, *acc[2], *tbuf[2];
+    sreal *y, *acc[2], *tbuf[2];
 };
 
 void ns_super_free(NsSuperFactor *f)
@@ -310,22 +316,26 @@ static inline Block block_of(const NsSuperFactor *f, int s)
 
 /* Helpers inlined into each kernel variant. Both give sums in a fixed order. */
 
-/* sum a[i] t[i] over n terms: two 4-lane partial sums over blocks of 8, their lanes added
- * pairwise, then the tail one by one. Written lane by lane, which GCC turns into 4-wide vector
- * code with one float-to-double conversion per four entries (its vector extensions converted
- * the floats two at a time, with shuffles); the sums and their order are the same. */
-static inline __attribute__((always_inline)) double dot_fd(const float *a, const double *t, int n)
+/* sum a[i] t[i] over n terms: two 8-lane partial sums over blocks of 16, added lane by lane,
+ * the lanes then halved pairwise (0+4, 1+5, ...; 0+2, 1+3; 0+1), then the tail one by one.
+ * Written lane by lane, which GCC turns into 8-wide vector code; the order is fixed. */
+static inline __attribute__((always_inline)) sreal dot(const float *a, const sreal *t, int n)
 {
-    double s0[4] = {0.0, 0.0, 0.0, 0.0}, s1[4] = {0.0, 0.0, 0.0, 0.0};
+    sreal s0[LANES] = {0}, s1[LANES] = {0};
     int i = 0;
-    for (; i + 8 <= n; i += 8)
-        for (int l = 0; l < 4; l++) {
-            s0[l] += (double)a[i + l] * t[i + l];
-            s1[l] += (double)a[i + 4 + l] * t[i + 4 + l];
+    for (; i + 2 * LANES <= n; i += 2 * LANES)
+        for (int l = 0; l < LANES; l++) {
+            s0[l] += a[i + l] * t[i + l];
+            s1[l] += a[i + LANES + l] * t[i + LANES + l];
         }
-    double sum = ((s0[0] + s1[0]) + (s0[1] + s1[1])) + ((s0[2] + s1[2]) + (s0[3] + s1[3]));
+    for (int l = 0; l < LANES; l++)
+        s0[l] += s1[l];
+    for (int h = LANES / 2; h > 0; h /= 2)
+        for (int l = 0; l < h; l++)
+            s0[l] += s0[l + h];
+    sreal sum = s0[0];
     for (; i < n; i++)
-        sum += (double)a[i] * t[i];
+        sum += a[i] * t[i];
     return sum;
 }
 
@@ -333,40 +343,39 @@ static inline __attribute__((always_inline)) double dot_fd(const float *a, const
  * columns at a time, ((x0 v0 + x1 v1) + (x2 v2 + x3 v3)), then one at a time. sgn is 1 or -1
  * (exact), so one loop serves both. */
 static inline __attribute__((always_inline)) void cols_acc(const float *X, size_t ld,
-                                                           const double *v, int c0, int c1, int i0,
-                                                           int i1, double sgn, double *out)
+                                                           const sreal *v, int c0, int c1, int i0,
+                                                           int i1, sreal sgn, sreal *out)
 {
     int j = c0;
     for (; j + 4 <= c1; j += 4) {
         const float *x0 = X + (size_t)j * ld, *x1 = x0 + ld, *x2 = x1 + ld, *x3 = x2 + ld;
-        double v0 = sgn * v[j], v1 = sgn * v[j + 1], v2 = sgn * v[j + 2], v3 = sgn * v[j + 3];
+        sreal v0 = sgn * v[j], v1 = sgn * v[j + 1], v2 = sgn * v[j + 2], v3 = sgn * v[j + 3];
         for (int i = i0; i < i1; i++)
-            out[i] += ((double)x0[i] * v0 + (double)x1[i] * v1) +
-                      ((double)x2[i] * v2 + (double)x3[i] * v3);
+            out[i] += (x0[i] * v0 + x1[i] * v1) + (x2[i] * v2 + x3[i] * v3);
     }
     for (; j < c1; j++) {
         const float *x0 = X + (size_t)j * ld;
-        double v0 = sgn * v[j];
+        sreal v0 = sgn * v[j];
         for (int i = i0; i < i1; i++)
-            out[i] += (double)x0[i] * v0;
+            out[i] += x0[i] * v0;
     }
 }
 
 /* Forward substitution over the supernodes list[0..count) of one owner: their contributions to
  * rows of that owner go into y, to the top part's rows into acc (when acc is given). */
-KERNEL static void forward(const NsSuperFactor *f, const int *list, int count, int self, double *y,
-                           double *acc, double *t)
+KERNEL static void forward(const NsSuperFactor *f, const int *list, int count, int self, sreal *y,
+                           sreal *acc, sreal *t)
 {
     for (int q = 0; q < count; q++) {
         Block b = block_of(f, list[q]);
         int nc = b.nc, nr = b.nr, nb = b.nb;
-        double *ys = y + b.k1;
+        sreal *ys = y + b.k1;
         for (int j = 0; j < nc; j++) {
             const float *col = b.X + (size_t)j * (size_t)nr;
-            double yj = ys[j] / (double)col[j];
+            sreal yj = ys[j] / col[j];
             ys[j] = yj;
             for (int i = j + 1; i < nc; i++)
-                ys[i] -= (double)col[i] * yj;
+                ys[i] -= col[i] * yj;
         }
         for (int i = 0; i < nb; i++)
             t[i] = 0.0;
@@ -382,20 +391,19 @@ KERNEL static void forward(const NsSuperFactor *f, const int *list, int count, i
 }
 
 /* Backward substitution over list[0..count) in reverse: rows below a supernode are final. */
-KERNEL static void backward(const NsSuperFactor *f, const int *list, int count, double *y,
-                            double *t)
+KERNEL static void backward(const NsSuperFactor *f, const int *list, int count, sreal *y, sreal *t)
 {
     for (int q = count - 1; q >= 0; q--) {
         Block b = block_of(f, list[q]);
         int nc = b.nc, nr = b.nr, nb = b.nb;
-        double *ys = y + b.k1;
+        sreal *ys = y + b.k1;
         for (int i = 0; i < nb; i++)
             t[i] = y[b.below[i]];
         for (int j = nc - 1; j >= 0; j--) {
             const float *col = b.X + (size_t)j * (size_t)nr;
-            double v = ys[j] - dot_fd(col + nc, t, nb);
-            v -= dot_fd(col + j + 1, ys + j + 1, nc - j - 1);
-            ys[j] = v / (double)col[j];
+            sreal v = ys[j] - dot(col + nc, t, nb);
+            v -= dot(col + j + 1, ys + j + 1, nc - j - 1);
+            ys[j] = v / col[j];
         }
     }
 }
@@ -439,7 +447,7 @@ static void run_bins(NsSuperFactor *f, int dir, int threads)
 
 /* Forward: rows [r0, r1) of supernode b take the columns [c0, c1)' share (own rows from ys,
  * rows below into t). */
-KERNEL static void top_rows(Block b, double *ys, double *t, int c0, int c1, int r0, int r1)
+KERNEL static void top_rows(Block b, sreal *ys, sreal *t, int c0, int c1, int r0, int r1)
 {
     int own_end = r1 < b.nc ? r1 : b.nc, below0 = r0 > b.nc ? r0 : b.nc;
     if (r0 < own_end)
@@ -451,17 +459,17 @@ KERNEL static void top_rows(Block b, double *ys, double *t, int c0, int c1, int 
 /* Backward: w[j - c0] = the sum, for columns j in [j0, j1) of the block [c0, c1), of column
  * j's entries times the final values below the block (rows below the supernode, in t, and its
  * own rows from c1 on). */
-KERNEL static void top_cols(Block b, const double *ys, const double *t, int c0, int c1, int j0,
-                            int j1, double *w)
+KERNEL static void top_cols(Block b, const sreal *ys, const sreal *t, int c0, int c1, int j0,
+                            int j1, sreal *w)
 {
     for (int j = j0; j < j1; j++) {
         const float *col = b.X + (size_t)j * (size_t)b.nr;
-        w[j - c0] = dot_fd(col + b.nc, t, b.nb) + dot_fd(col + c1, ys + c1, b.nc - c1);
+        w[j - c0] = dot(col + b.nc, t, b.nb) + dot(col + c1, ys + c1, b.nc - c1);
     }
 }
 
 /* Part `half` (0 or 1) of the parallel work of block [c0, c1) in direction dir. */
-static void top_half(Block b, double *ys, double *t, double *w, int c0, int c1, int dir, int half)
+static void top_half(Block b, sreal *ys, sreal *t, sreal *w, int c0, int c1, int dir, int half)
 {
     if (dir == 0) {
         int mid = c1 + (b.nr - c1) / 2;
@@ -473,23 +481,23 @@ static void top_half(Block b, double *ys, double *t, double *w, int c0, int c1, 
 }
 
 /* The serial part of block [c0, c1): its triangle. */
-static void top_triangle(Block b, double *ys, const double *w, int c0, int c1, int dir)
+static void top_triangle(Block b, sreal *ys, const sreal *w, int c0, int c1, int dir)
 {
     if (dir == 0) {
         for (int j = c0; j < c1; j++) {
             const float *col = b.X + (size_t)j * (size_t)b.nr;
-            double yj = ys[j] / (double)col[j];
+            sreal yj = ys[j] / col[j];
             ys[j] = yj;
             for (int i = j + 1; i < c1; i++)
-                ys[i] -= (double)col[i] * yj;
+                ys[i] -= col[i] * yj;
         }
     } else {
         for (int j = c1 - 1; j >= c0; j--) {
             const float *col = b.X + (size_t)j * (size_t)b.nr;
-            double v = ys[j] - w[j - c0];
+            sreal v = ys[j] - w[j - c0];
             for (int i = j + 1; i < c1; i++)
-                v -= (double)col[i] * ys[i];
-            ys[j] = v / (double)col[j];
+                v -= col[i] * ys[i];
+            ys[j] = v / col[j];
         }
     }
 }
@@ -499,7 +507,7 @@ static void top_triangle(Block b, double *ys, const double *w, int c0, int c1, i
 static void top_super(NsSuperFactor *f, int s, int dir, int threads)
 {
     Block b = block_of(f, s);
-    double *y = f->y, *ys = y + b.k1, *t = f->tbuf[0], w[TOP_CB];
+    sreal *y = f->y, *ys = y + b.k1, *t = f->tbuf[0], w[TOP_CB];
     for (int i = 0; i < b.nb; i++)
         t[i] = dir == 0 ? 0.0 : y[b.below[i]];
     int nblocks = (b.nc + TOP_CB - 1) / TOP_CB;
@@ -554,9 +562,20 @@ static void top_super(NsSuperFactor *f, int s, int dir, int threads)
 void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
 {
     int n = f->n;
-    double *y = f->y;
+    sreal *y = f->y;
+    /* b scaled by a power of two (exact) to a largest entry in [0.5, 1), so that the float
+     * substitutions neither overflow nor lose small right-hand sides (a converging residual)
+     * to underflow; the answer is scaled back. */
+    double big = 0.0;
     for (int k = 0; k < n; k++)
-        y[k] = b[f->perm[k]];
+        big = fabs(b[k]) > big ? fabs(b[k]) : big;
+    int e = 0;
+    if (big > 0.0 && isfinite(big))
+        frexp(big, &e);
+    e = e < -1020 ? -1020 : e > 1020 ? 1020 : e; /* both factors finite */
+    double down = ldexp(1.0, -e), up = ldexp(1.0, e);
+    for (int k = 0; k < n; k++)
+        y[k] = (sreal)(b[f->perm[k]] * down);
     for (int i = 0; i < f->ntop_cols; i++) {
         f->acc[0][f->top_cols[i]] = 0.0;
         f->acc[1][f->top_cols[i]] = 0.0;
@@ -574,5 +593,5 @@ void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
         top_super(f, f->list[TOP][q], 1, threads);
     run_bins(f, 1, threads);
     for (int k = 0; k < n; k++)
-        x[f->perm[k]] = y[k];
+        x[f->perm[k]] = (double)y[k] * up;
 }

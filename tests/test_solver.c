@@ -460,8 +460,8 @@ static int factor_applied_to_columns(void)
     return 0;
 }
 
-/* The factor's single-precision copy (sim/supernodal.c): close to the double solve, not the
- * same operator (so it is in use), bit-identical on one thread and two, b and z distinct. */
+/* The factor's single-precision copy and substitutions (sim/supernodal.c): close to the double
+ * solve, not the same operator (so it is in use), bit-identical on one thread and two. */
 static int single_precision_preconditioner(void)
 {
     const int m = 12, n = m * m * m, n3 = 3 * n;
@@ -500,7 +500,19 @@ static int single_precision_preconditioner(void)
         nrm += z[i] * z[i];
     }
     err = sqrt(err / nrm);
+    printf("  relative difference from the double solve: %.2g\n", err);
     ENSURE(err > 1e-12 && err < 1e-5); /* floats' rounding, not a double solve, not garbage */
+    /* Right-hand sides beyond the range of floats, both ways: the same accuracy. */
+    for (int k = 0; k < 2; k++) {
+        double scale = k ? 1e40 : 1e-40;
+        for (int i = 0; i < n3; i++)
+            z2[i] = b[i] * scale;
+        ENSURE(ns_solver_precondition(s, n3, z2, z2) == 0);
+        double e2 = 0.0;
+        for (int i = 0; i < n3; i++)
+            e2 += (z2[i] / scale - z[i]) * (z2[i] / scale - z[i]);
+        ENSURE(sqrt(e2 / nrm) < 1e-5);
+    }
     /* A refactorization's copy replaces the old one: the new matrix's answer. */
     NsBlockMatrix A2;
     grid_matrix(&A2, m, 2e3, 1.0);
