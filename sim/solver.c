@@ -75,14 +75,12 @@ struct NsSolver {
     long solves; /* solve calls so far; the clock of refreshes */
     cholmod_common cm;
     int cm_started;
-    cholmod_factor *Lsym; /* symbolic analysis (ordering, supernodes) for `pattern` */
-    cholmod_factor *L;    /* numeric factor in use (possibly stale), NULL if none */
-    NsSuperFactor *sf;    /* L's single-precision copy for preconditioning (supernodal.h), made
-                             at L's first preconditioning (a background refactorization makes
-                             it on its thread), or NULL: then CHOLMOD's solve preconditions */
-    int sf_tried;         /* the copy of this L was attempted */
-    double *pbuf;         /* (nfree) its right-hand side */
-    int pbuf_cap;
+    cholmod_factor *Lsym;  /* symbolic analysis (ordering, supernodes) for `pattern` */
+    cholmod_factor *L;     /* numeric factor in use (possibly stale), NULL if none */
+    NsSuperFactor *sf;     /* L's single-precision copy for preconditioning (supernodal.h), made
+                              at L's first preconditioning (a background refactorization makes
+                              it on its thread), or NULL: then CHOLMOD's solve preconditions */
+    int sf_tried;          /* the copy of this L was attempted */
     cholmod_factor *spare; /* a numeric factor of the same analysis no longer in use: the next
                               factorization overwrites it rather than allocating (~10 ms of page
                               faults for the box's 24 MB factor) */
@@ -97,6 +95,10 @@ struct NsSolver {
     int *dof; /* (3n) free index of each scalar DOF, -1 if fixed */
     int n3;   /* 3n of the last numbering */
     int dof_cap;
+    /* The same numbering the other way: free DOF f is scalar DOF dof_src[f] (nfree of the
+     * last numbering), and the fixed ones, dof_held[0..nheld). */
+    int *dof_src, *dof_held;
+    int nheld, src_cap, held_cap;
     double *work; /* 5 vectors of 3n for CG, then the chunk partial sums */
     int work_cap;
 };
@@ -252,7 +254,8 @@ void ns_solver_destroy(NsSolver *s)
         cholmod_finish(&s->cm);
     }
     ns_super_free(s->sf);
-    free(s->pbuf);
+    free(s->dof_src);
+    free(s->dof_held);
     free(s->dof);
     free(s->job.dof);
     free(s->work);
@@ -305,12 +308,22 @@ static int ensure(void **p, int *cap, int need, size_t elem)
 /* Number the free scalar DOFs in node order; returns their count, or -1 (memory). */
 static int number_dofs(NsSolver *s, int n, const uint8_t *fixed)
 {
-    if (ensure((void **)&s->dof, &s->dof_cap, 3 * n > 0 ? 3 * n : 1, sizeof(int)))
+    int m = 3 * n > 0 ? 3 * n : 1;
+    if (ensure((void **)&s->dof, &s->dof_cap, m, sizeof(int)) ||
+        ensure((void **)&s->dof_src, &s->src_cap, m, sizeof(int)) ||
+        ensure((void **)&s->dof_held, &s->held_cap, m, sizeof(int)))
         return -1;
-    int f = 0;
+    int f = 0, h = 0;
     s->n3 = 3 * n;
-    for (int i = 0; i < 3 * n; i++)
-        s->dof[i] = (fixed && fixed[i]) ? -1 : f++;
+    for (int i = 0; i < 3 * n; i++) {
+        int held = fixed && fixed[i];
+        s->dof[i] = held ? -1 : f;
+        if (held)
+            s->dof_held[h++] = i;
+        else
+            s->dof_src[f++] = i;
+    }
+    s->nheld = h;
     return f;
 }
 
@@ -566,16 +579,13 @@ static int precondition(NsSolver *s, int n3, const double *r, double *z)
         s->sf = ns_super_from_cholmod(s->L);
         s->sf_tried = 1;
     }
-    if (!s->sf || ns_super_n(s->sf) != s->nfree ||
-        ensure((void **)&s->pbuf, &s->pbuf_cap, s->nfree, sizeof(double)))
-        return apply_factor(s, n3, r, z); /* no copy, or no memory for its vector */
-    double *w = s->pbuf;
-    for (int i = 0; i < n3; i++)
-        if (s->dof[i] >= 0)
-            w[s->dof[i]] = r[i];
-    ns_super_solve(s->sf, w, w, loop_threads(s));
-    for (int i = 0; i < n3; i++)
-        z[i] = s->dof[i] >= 0 ? w[s->dof[i]] : 0.0;
+    if (!s->sf || ns_super_n(s->sf) != s->nfree || n3 != s->n3)
+        return apply_factor(s, n3, r, z); /* no copy */
+    /* Straight between the full-length vectors and the factor's numbering (dof_src), the held
+     * entries zeroed after (r and z may be the same array). */
+    ns_super_solve_at(s->sf, s->dof_src, r, z, loop_threads(s));
+    for (int k = 0; k < s->nheld; k++)
+        z[s->dof_held[k]] = 0.0;
     return 0;
 }
 

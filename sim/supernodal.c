@@ -559,7 +559,7 @@ static void top_super(NsSuperFactor *f, int s, int dir, int threads)
             y[b.below[i]] -= t[i];
 }
 
-void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
+void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double *x, int threads)
 {
     int n = f->n;
     sreal *y = f->y;
@@ -567,15 +567,19 @@ void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
      * substitutions neither overflow nor lose small right-hand sides (a converging residual)
      * to underflow; the answer is scaled back. */
     double big = 0.0;
-    for (int k = 0; k < n; k++)
-        big = fabs(b[k]) > big ? fabs(b[k]) : big;
+    for (int k = 0; k < n; k++) {
+        double v = fabs(b[at ? at[k] : k]);
+        big = v > big ? v : big;
+    }
     int e = 0;
     if (big > 0.0 && isfinite(big))
         frexp(big, &e);
     e = e < -1020 ? -1020 : e > 1020 ? 1020 : e; /* both factors finite */
     double down = ldexp(1.0, -e), up = ldexp(1.0, e);
-    for (int k = 0; k < n; k++)
-        y[k] = (sreal)(b[f->perm[k]] * down);
+    for (int k = 0; k < n; k++) {
+        int j = f->perm[k];
+        y[k] = (sreal)(b[at ? at[j] : j] * down);
+    }
     for (int i = 0; i < f->ntop_cols; i++) {
         f->acc[0][f->top_cols[i]] = 0.0;
         f->acc[1][f->top_cols[i]] = 0.0;
@@ -592,6 +596,13 @@ void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
     for (int q = f->count[TOP] - 1; q >= 0; q--)
         top_super(f, f->list[TOP][q], 1, threads);
     run_bins(f, 1, threads);
-    for (int k = 0; k < n; k++)
-        x[f->perm[k]] = (double)y[k] * up;
+    for (int k = 0; k < n; k++) {
+        int j = f->perm[k];
+        x[at ? at[j] : j] = (double)y[k] * up;
+    }
+}
+
+void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
+{
+    ns_super_solve_at(f, NULL, b, x, threads);
 }

@@ -40,5 +40,8 @@ void ns_super_cut(const NsSuperFactor *f, size_t entries[3]);
  * may be the same array), with up to `threads` threads (two are used at most). Not
  * re-entrant: the copy keeps its workspace. */
 void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads);
+/* The same with the factored matrix's entry k at b[at[k]] and x[at[k]] (at: n distinct
+ * indices; x's other entries are left alone), so a caller's longer vectors need no copies. */
+void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double *x, int threads);
 
 #endif
