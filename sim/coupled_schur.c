@@ -717,25 +717,33 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
         if (!(php > 0.0))
             break;
         double alpha = rg / php;
-        for (int i = 0; i < nt3; i++)
+        for (int i = 0; i < nt3; i++) {
             xt[i] += alpha * p[i];
-        for (int i = 0; i < S->nr3; i++)
-            xn[i] += alpha * p[nt3 + i];
-        for (int i = 0; i < n; i++)
             r[i] += alpha * hp[i];
+        }
+        for (int i = nt3; i < n; i++) {
+            xn[i - nt3] += alpha * p[i];
+            r[i] += alpha * hp[i];
+        }
         if (project(w, S, r, g, lam, h, tmp))
             return -1;
         add_bt(S, lam, -1.0, r, r + nt3);
-        mask_fixed(S, r);
         for (int j = 0; j < q3; j++)
             acc[j] += lam[j];
-        double rg2 = sdot(r, g, n), beta = rg2 / rg;
+        /* The fixed entries of r zeroed (mask_fixed), r.g and the scaled |r|^2 in one pass,
+         * each sum in index order as apart. */
+        double rg2 = 0.0;
+        rn2 = 0.0;
+        for (int i = 0; i < n; i++) {
+            if (i < nt3 ? S->tfixed[i] : S->rfixed[i - nt3])
+                r[i] = 0.0;
+            rg2 += r[i] * g[i];
+            rn2 += (w->sc[i] * r[i]) * (w->sc[i] * r[i]);
+        }
+        double beta = rg2 / rg;
         rg = rg2;
         for (int i = 0; i < n; i++)
             p[i] = -g[i] + beta * p[i];
-        rn2 = 0.0;
-        for (int i = 0; i < n; i++)
-            rn2 += (w->sc[i] * r[i]) * (w->sc[i] * r[i]);
         it++;
     }
 #undef X_GET
