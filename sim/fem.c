@@ -270,6 +270,165 @@ void ns_fem_tet_forces_svd(const NsTetRest *r, const NsFemMaterial *mat, const d
     damping_forces(r, mat, frame, g, v, f);
 }
 
+/* Kernels that run several tets, or several columns, on vector lanes: with GCC on x86-64 also
+ * built for AVX2 (four doubles a vector) and picked at load time. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) &&                             \
+    !defined(__SANITIZE_ADDRESS__)
+#define COLS_KERNEL __attribute__((target_clones("avx2", "default")))
+#else
+#define COLS_KERNEL
+#endif
+
+/* ---- ns_fem_tet_forces_svd for several tets at once ----
+ * Four tets side by side (an entry of each in a row: [entry][lane]), every lane doing the scalar
+ * code's operations above in their order, products with the zeros of a diagonal stress
+ * included, so the compiler can run the lanes on vector registers and each lane keeps the bits of
+ * a tet done alone. The model's diagonal stress (a logarithm for neo-Hookean) stays per tet. */
+#define FL 4
+
+/* M = sum_a y_a g_a^T (gradient_of) on the lanes. */
+#define LANES_FOR for (int l = 0; l < FL; l++)
+
+COLS_KERNEL static void forces_lanes(const NsTetRest *const r[FL], const NsFemMaterial *const m[FL],
+                                     const double *const *const v[FL],
+                                     const NsTetFrame *const fr[FL], const int damp[FL],
+                                     double out[FL][12])
+{
+    double g[12][FL], U[9][FL], V[9][FL], W[FL], T[9][FL], P[9][FL], f[12][FL];
+    LANES_FOR
+    {
+        for (int k = 0; k < 3; k++) {
+            g[3 + k][l] = r[l]->Bm[0 + k];
+            g[6 + k][l] = r[l]->Bm[3 + k];
+            g[9 + k][l] = r[l]->Bm[6 + k];
+        }
+        for (int k = 0; k < 9; k++) {
+            U[k][l] = fr[l]->U[k];
+            V[k][l] = fr[l]->V[k];
+        }
+        W[l] = r[l]->W;
+    }
+    for (int k = 0; k < 3; k++)
+        LANES_FOR g[k][l] = -(g[3 + k][l] + g[6 + k][l] + g[9 + k][l]);
+    /* The elastic stress: P = U diag(ps) V^T, rot_out's products (zeros included). */
+    double Ph[9][FL];
+    LANES_FOR
+    {
+        double ps[3];
+        diag_stress(m[l], fr[l]->s, ps);
+        for (int k = 0; k < 9; k++)
+            Ph[k][l] = 0.0;
+        Ph[0][l] = ps[0];
+        Ph[4][l] = ps[1];
+        Ph[8][l] = ps[2];
+    }
+#define ROT_OUT(M, OUT)                                                                            \
+    do {                                                                                           \
+        for (int i = 0; i < 3; i++)                                                                \
+            for (int j = 0; j < 3; j++)                                                            \
+                LANES_FOR T[3 * i + j][l] = M[3 * i + 0][l] * V[3 * j + 0][l] +                    \
+                                            M[3 * i + 1][l] * V[3 * j + 1][l] +                    \
+                                            M[3 * i + 2][l] * V[3 * j + 2][l];                     \
+        for (int i = 0; i < 3; i++)                                                                \
+            for (int j = 0; j < 3; j++)                                                            \
+                LANES_FOR OUT[3 * i + j][l] = U[3 * i + 0][l] * T[0 + j][l] +                      \
+                                              U[3 * i + 1][l] * T[3 + j][l] +                      \
+                                              U[3 * i + 2][l] * T[6 + j][l];                       \
+    } while (0)
+#define ADD_FORCES(M, MASK)                                                                        \
+    do {                                                                                           \
+        for (int a = 0; a < 4; a++)                                                                \
+            for (int i = 0; i < 3; i++)                                                            \
+                LANES_FOR                                                                          \
+                {                                                                                  \
+                    double d = f[3 * a + i][l] - W[l] * (M[3 * i + 0][l] * g[3 * a + 0][l] +       \
+                                                         M[3 * i + 1][l] * g[3 * a + 1][l] +       \
+                                                         M[3 * i + 2][l] * g[3 * a + 2][l]);       \
+                    f[3 * a + i][l] = (MASK) ? d : f[3 * a + i][l];                                \
+                }                                                                                  \
+    } while (0)
+    ROT_OUT(Ph, P);
+    for (int k = 0; k < 12; k++)
+        LANES_FOR f[k][l] = 0.0;
+    ADD_FORCES(P, 1);
+    /* Damping (damping_forces): dF/dt, rotated in, the damping tangent, rotated out. */
+    int any = 0;
+    LANES_FOR any |= damp[l];
+    if (any) {
+        double Fd[9][FL], Fdh[9][FL], Pdh[9][FL], Pd[9][FL], TA[9][FL], ta[3][FL], tb[3][FL];
+        LANES_FOR
+        {
+            Tangent t;
+            damping_tangent(m[l], &t);
+            for (int k = 0; k < 9; k++)
+                TA[k][l] = t.A[k];
+            for (int p = 0; p < 3; p++) {
+                ta[p][l] = t.a[p];
+                tb[p][l] = t.b[p];
+            }
+        }
+        for (int k = 0; k < 9; k++)
+            LANES_FOR Fd[k][l] = 0.0;
+        for (int a = 0; a < 4; a++)
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    LANES_FOR Fd[3 * i + j][l] += v[l][a][i] * g[3 * a + j][l];
+        /* rot_in: T = Fd V, then U^T T */
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                LANES_FOR T[3 * i + j][l] = Fd[3 * i + 0][l] * V[0 + j][l] +
+                                            Fd[3 * i + 1][l] * V[3 + j][l] +
+                                            Fd[3 * i + 2][l] * V[6 + j][l];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                LANES_FOR Fdh[3 * i + j][l] = U[0 + i][l] * T[0 + j][l] +
+                                              U[3 + i][l] * T[3 + j][l] + U[6 + i][l] * T[6 + j][l];
+        /* apply_tangent */
+        for (int i = 0; i < 3; i++)
+            LANES_FOR Pdh[4 * i][l] = TA[3 * i + 0][l] * Fdh[0][l] + TA[3 * i + 1][l] * Fdh[4][l] +
+                                      TA[3 * i + 2][l] * Fdh[8][l];
+        for (int p = 0; p < 3; p++) {
+            int i = pair_ij[p][0], j = pair_ij[p][1];
+            LANES_FOR
+            {
+                Pdh[3 * i + j][l] = ta[p][l] * Fdh[3 * i + j][l] + tb[p][l] * Fdh[3 * j + i][l];
+                Pdh[3 * j + i][l] = ta[p][l] * Fdh[3 * j + i][l] + tb[p][l] * Fdh[3 * i + j][l];
+            }
+        }
+        ROT_OUT(Pdh, Pd);
+        ADD_FORCES(Pd, damp[l]);
+    }
+#undef ROT_OUT
+#undef ADD_FORCES
+    LANES_FOR for (int k = 0; k < 12; k++) out[l][k] = f[k][l];
+}
+
+void ns_fem_tet_forces_svd_n(int n, const NsTetRest *const r[], const NsFemMaterial *const mat[],
+                             const double *const *const v[], double *const f[],
+                             const NsTetFrame *const frame[])
+{
+    for (int k0 = 0; k0 < n; k0 += FL) {
+        /* A short last group repeats its first tet in the spare lanes (their results dropped). */
+        const NsTetRest *rl[FL];
+        const NsFemMaterial *ml[FL];
+        const double *const *vl[FL];
+        const NsTetFrame *fl[FL];
+        int damp[FL];
+        double out[FL][12];
+        for (int l = 0; l < FL; l++) {
+            int k = k0 + l < n ? k0 + l : k0;
+            rl[l] = r[k];
+            ml[l] = mat[k];
+            vl[l] = v[k];
+            fl[l] = frame[k];
+            damp[l] = !(mat[k]->damp_mu == 0.0 && mat[k]->damp_lambda == 0.0);
+        }
+        forces_lanes(rl, ml, vl, fl, damp, out);
+        for (int l = 0; l < FL && k0 + l < n; l++)
+            memcpy(f[k0 + l], out[l], sizeof out[l]);
+    }
+}
+
 static void inverse3(const double *M, double *out)
 {
     double d = det3(M);
@@ -320,12 +479,6 @@ void ns_fem_tet_forces_fixed_frame(const NsTetRest *r, const NsFemMaterial *mat,
  * the bits of a column at a time. With GCC on x86-64 also built for AVX2 (four columns a
  * vector) and picked at load time. */
 #define NCOL 12
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) &&                             \
-    !defined(__SANITIZE_ADDRESS__)
-#define COLS_KERNEL __attribute__((target_clones("avx2", "default")))
-#else
-#define COLS_KERNEL
-#endif
 
 /* Column 3b + d's direction in the rotated frame: dF^ = (U^T e_d) (V^T g_b)^T, an entry a row. */
 typedef struct Dirs {

@@ -56,6 +56,11 @@ void ns_fem_tet_forces(const NsTetRest *r, const NsFemMaterial *mat, const doubl
 void ns_fem_tet_gradient(const NsTetRest *r, const double *const x[4], double F[9]);
 void ns_fem_tet_forces_svd(const NsTetRest *r, const NsFemMaterial *mat, const double *const v[4],
                            double f[12], const NsTetFrame *frame);
+/* ns_fem_tet_forces_svd for n tets (tet k: r[k], mat[k], its nodes' velocities v[k][0..3], f[k],
+ * frame[k]), four at a time on vector lanes; the same bits as one at a time. */
+void ns_fem_tet_forces_svd_n(int n, const NsTetRest *const r[], const NsFemMaterial *const mat[],
+                             const double *const *const v[], double *const f[],
+                             const NsTetFrame *const frame[]);
 
 /* The same forces with a given frame held fixed (U, V from frame; the model's stress is
  * evaluated on U^T F V as a full matrix). Used to check the Jacobians by finite differences. */

@@ -537,17 +537,13 @@ typedef struct AssemblyCounts {
     double jacobian_ms; /* time spent on Jacobians by one thread */
 } AssemblyCounts;
 
-/* Phase 1 for tet e: writes only tet e's own slots. */
+/* Phase 1 for tet e after its forces (tet_phase_n): their check, and its Jacobians when due.
+ * Writes only tet e's own slots. */
 static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
 {
     const NsMesh *M = &t->mesh;
-    const int *tn = M->tet_node + 4 * e;
-    const double *v[4];
-    for (int k = 0; k < 4; k++)
-        v[k] = M->v + 3 * tn[k];
     const NsTissueMaterial *mat = &t->materials[M->tet_region[e]];
-    double *f = t->tet_force + 12 * (size_t)e;
-    ns_fem_tet_forces_svd(&t->rest[e], &mat->fem, v, f, &t->frame[e]);
+    double *f = t->tet_force + 12 * (size_t)e; /* computed by tet_phase_n */
     for (int k = 0; k < 12; k++)
         if (!isfinite(f[k])) {
             c->nan++;
@@ -576,9 +572,9 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
     }
 }
 
-/* Phase 1 for the tets es[0..n): their deformation gradients' SVDs (§3.2) in batches of
- * SVD_BATCH (ns_svd3_n: the same bits as one at a time, several at once on vector lanes), then
- * each tet's forces and, when due, Jacobians (tet_phase). */
+/* Phase 1 for the tets es[0..n): in batches of SVD_BATCH, their deformation gradients' SVDs
+ * (§3.2) and their forces (ns_svd3_n, ns_fem_tet_forces_svd_n: the same bits as one at a time,
+ * several at once on vector lanes), then each tet's Jacobians when due (tet_phase). */
 #define SVD_BATCH 8
 static void tet_phase_n(NsTissue *t, const int *es, int n, AssemblyCounts *c)
 {
@@ -600,6 +596,24 @@ static void tet_phase_n(NsTissue *t, const int *es, int n, AssemblyCounts *c)
             V[k] = t->frame[e].V;
         }
         ns_svd3_n(m, Fp, U, s, V);
+        const NsTetRest *rp[SVD_BATCH];
+        const NsFemMaterial *mp[SVD_BATCH];
+        const double *vn[SVD_BATCH][4];
+        const double *const *vp[SVD_BATCH];
+        double *fp[SVD_BATCH];
+        const NsTetFrame *frp[SVD_BATCH];
+        for (int k = 0; k < m; k++) {
+            int e = es[k0 + k];
+            const int *tn = M->tet_node + 4 * e;
+            for (int a = 0; a < 4; a++)
+                vn[k][a] = M->v + 3 * tn[a];
+            rp[k] = &t->rest[e];
+            mp[k] = &t->materials[M->tet_region[e]].fem;
+            vp[k] = vn[k];
+            fp[k] = t->tet_force + 12 * (size_t)e;
+            frp[k] = &t->frame[e];
+        }
+        ns_fem_tet_forces_svd_n(m, rp, mp, vp, fp, frp);
         for (int k = 0; k < m; k++)
             tet_phase(t, es[k0 + k], c);
     }

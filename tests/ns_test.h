@@ -20,7 +20,7 @@
     do {                                                                                           \
         double ns_v_ = (double)(value), ns_t_ = (double)(tol);                                     \
         if (!(fabs(ns_v_) <= ns_t_)) {                                                             \
-            fprintf(stderr, "%s:%d: ENSURE_SMALL(%s = %.17g, %.3g) failed\n", __FILE__, __LINE__,   \
+            fprintf(stderr, "%s:%d: ENSURE_SMALL(%s = %.17g, %.3g) failed\n", __FILE__, __LINE__,  \
                     #value, ns_v_, ns_t_);                                                         \
             return 1;                                                                              \
         }                                                                                          \
@@ -30,6 +30,16 @@ typedef struct NsTestCase {
     const char *name;
     int (*fn)(void);
 } NsTestCase;
+
+/* 1 if a and b hold the same bits, any two NaNs counting as equal (which NaN an operation on
+ * two of them gives can depend on operand order). */
+static inline int ns_same_bits(const double *a, const double *b, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!(isnan(a[i]) && isnan(b[i])) && memcmp(a + i, b + i, sizeof *a) != 0)
+            return 0;
+    return 1;
+}
 
 static inline int ns_test_main(int argc, char **argv, const NsTestCase *cases, int count)
 {

@@ -4,7 +4,9 @@
 #include "fem.h"
 #include "ns_test.h"
 
+#include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <string.h>
 
 static double rnd(uint64_t *st)
@@ -278,9 +280,75 @@ static int projected_stiffness_is_definite(void)
     return 0;
 }
 
+/* ns_fem_tet_forces_svd_n gives ns_fem_tet_forces_svd's bits for every tet of a batch, whatever
+ * its lane: both models, with and without damping side by side, stretched, inverted and
+ * non-finite tets, in batches of 1 to 9. */
+static int batch_forces_match_single(void)
+{
+    enum { COUNT = 600 };
+    static NsTetRest rest[COUNT];
+    static NsTetFrame frame[COUNT];
+    static double xs[COUNT][12], vs[COUNT][12], f[COUNT][12];
+    NsFemMaterial mats[4] = {ns_fem_material(NS_MODEL_COROTATIONAL, 30e3, 0.45, 1.0, 2.0),
+                             ns_fem_material(NS_MODEL_NEOHOOKEAN, 30e3, 0.45, 1.0, 2.0),
+                             ns_fem_material(NS_MODEL_COROTATIONAL, 60e3, 0.3, 0.0, 0.0),
+                             ns_fem_material(NS_MODEL_NEOHOOKEAN, 60e3, 0.3, 0.0, 0.0)};
+    const NsFemMaterial *mat[COUNT];
+    uint64_t st = 77;
+    for (int n = 0; n < COUNT; n++) {
+        double u[12];
+        make_tet(&st, u, xs[n], n % 5 == 0 ? 0.8 : 0.1);
+        if (n % 7 == 3) /* inverted: one node through the opposite face */
+            for (int i = 0; i < 3; i++)
+                xs[n][i] = 2.0 * xs[n][3 + i] - xs[n][i];
+        for (int i = 0; i < 12; i++)
+            vs[n][i] = 0.05 * rnd(&st);
+        if (n % 11 == 4)
+            vs[n][5] = NAN;
+        ENSURE(ns_fem_rest(u, u + 3, u + 6, u + 9, &rest[n]) == 0);
+        mat[n] = &mats[(n * 7 + n / 9) % 4];
+        const double *xp[4], *vp[4];
+        ptrs(xs[n], xp);
+        ptrs(vs[n], vp);
+        ns_fem_tet_forces(&rest[n], mat[n], xp, vp, f[n], &frame[n]); /* the frame */
+    }
+    int done = 0;
+    for (int batch = 1; done < COUNT; batch = batch % 9 + 1) {
+        int m = COUNT - done < batch ? COUNT - done : batch;
+        const NsTetRest *rp[9];
+        const NsFemMaterial *mp[9];
+        const double *vn[9][4];
+        const double *const *vp[9];
+        double *fp[9];
+        const NsTetFrame *frp[9];
+        for (int k = 0; k < m; k++) {
+            rp[k] = &rest[done + k];
+            mp[k] = mat[done + k];
+            ptrs(vs[done + k], vn[k]);
+            vp[k] = vn[k];
+            fp[k] = f[done + k];
+            frp[k] = &frame[done + k];
+        }
+        ns_fem_tet_forces_svd_n(m, rp, mp, vp, fp, frp);
+        done += m;
+    }
+    for (int n = 0; n < COUNT; n++) {
+        const double *vp[4];
+        ptrs(vs[n], vp);
+        double f1[12];
+        ns_fem_tet_forces_svd(&rest[n], mat[n], vp, f1, &frame[n]);
+        if (!ns_same_bits(f1, f[n], 12)) {
+            fprintf(stderr, "tet %d: the batch's forces differ from one at a time\n", n);
+            return 1;
+        }
+    }
+    return 0;
+}
+
 NS_TEST_MAIN({"forces_are_energy_gradient", forces_are_energy_gradient},
              {"jacobians_match_finite_differences", jacobians_match_finite_differences},
              {"rigid_motion_is_force_free", rigid_motion_is_force_free},
              {"forces_balance", forces_balance},
              {"inverted_element_restores", inverted_element_restores},
-             {"projected_stiffness_is_definite", projected_stiffness_is_definite})
+             {"projected_stiffness_is_definite", projected_stiffness_is_definite},
+             {"batch_forces_match_single", batch_forces_match_single})

@@ -128,16 +128,6 @@ static int near_degenerate(void)
     return 0;
 }
 
-/* a and b hold the same bits, except that any two NaNs match (which NaN an operation on two NaNs
- * gives depends on the order of its operands, which a compiler may swap). */
-static int same_bits(const double *a, const double *b, int n)
-{
-    for (int i = 0; i < n; i++)
-        if (!(isnan(a[i]) && isnan(b[i])) && memcmp(a + i, b + i, sizeof *a) != 0)
-            return 0;
-    return 1;
-}
-
 /* ns_svd3_n gives ns_svd3's bits for every matrix of a batch, whatever its lane: random
  * matrices at scales from 1e-8 to 1e16 (a sliver's Jacobian entries reach ~1e17), rank-deficient,
  * reflected, diagonal (no rotation at all), and non-finite ones, in batches of 1 to 9. */
@@ -193,7 +183,8 @@ static int batch_matches_single(void)
     for (int n = 0; n < COUNT; n++) {
         double U1[9], s1[3], V1[9];
         ns_svd3(F[n], U1, s1, V1);
-        if (!same_bits(U1, U[n], 9) || !same_bits(s1, s[n], 3) || !same_bits(V1, V[n], 9)) {
+        if (!ns_same_bits(U1, U[n], 9) || !ns_same_bits(s1, s[n], 3) ||
+            !ns_same_bits(V1, V[n], 9)) {
             fprintf(stderr, "matrix %d: the batch's decomposition differs from ns_svd3's\n", n);
             return 1;
         }
