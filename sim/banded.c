@@ -85,31 +85,13 @@ static double entry(const NsBanded *m, int r, int c)
     return m->val[block_offset(m, bi, bj) + (size_t)(3 * (r % 3) + c % 3)];
 }
 
-int ns_banded_solve(const NsBanded *m, const uint8_t *dof_fixed, const double *b, double *x,
-                    double *work)
+/* The band Cholesky factor of A (with dof_fixed's rows and columns as the identity) into
+ * m->fac. Returns 0, or -1 if A_ff is not (numerically) positive definite. */
+int ns_banded_factor(const NsBanded *m, const uint8_t *dof_fixed)
 {
     const int nr = 3 * m->n, p = scalar_band(m), w = p + 1;
     double *L = m->fac; /* L(r, c) for r - p <= c <= r at L[w * r + (c - r + p)] */
-    double *y = work ? work : m->fac + (size_t)nr * (size_t)w;
 #define LF(r, c) L[(size_t)w * (size_t)(r) + (size_t)((c) - (r) + p)]
-
-    /* Right-hand side with the fixed DOFs moved over; fixed rows become x_c = x_c. The full
-     * row is read from the stored band, so columns right of the diagonal count too. */
-    for (int r = 0; r < nr; r++) {
-        if (dof_fixed && dof_fixed[r]) {
-            y[r] = x[r];
-            continue;
-        }
-        double s = b[r];
-        if (dof_fixed) {
-            int c0 = r - p < 0 ? 0 : r - p, c1 = r + p > nr - 1 ? nr - 1 : r + p;
-            for (int c = c0; c <= c1; c++)
-                if (dof_fixed[c])
-                    s -= entry(m, r, c) * x[c];
-        }
-        y[r] = s;
-    }
-
     /* Band Cholesky, row by row: L(r, c) = (A(r, c) - sum_k L(r, k) L(c, k)) / L(c, c), where
      * k runs over the columns both rows reach. Fixed rows and columns are the identity. A pivot
      * that is not clearly positive (relative to its diagonal entry, or NaN) means A_ff is not
@@ -136,6 +118,35 @@ int ns_banded_solve(const NsBanded *m, const uint8_t *dof_fixed, const double *b
         }
     }
 
+#undef LF
+    return 0;
+}
+
+/* The right-hand side with the fixed DOFs moved over into y, then the two triangular solves
+ * with the factor in m->fac, in y. */
+static void solve_band(const NsBanded *m, const uint8_t *dof_fixed, const double *b,
+                       const double *x, double *y)
+{
+    const int nr = 3 * m->n, p = scalar_band(m), w = p + 1;
+    const double *L = m->fac;
+#define LF(r, c) L[(size_t)w * (size_t)(r) + (size_t)((c) - (r) + p)]
+    /* Right-hand side with the fixed DOFs moved over; fixed rows become x_c = x_c. The full
+     * row is read from the stored band, so columns right of the diagonal count too. */
+    for (int r = 0; r < nr; r++) {
+        if (dof_fixed && dof_fixed[r]) {
+            y[r] = x[r];
+            continue;
+        }
+        double s = b[r];
+        if (dof_fixed) {
+            int c0 = r - p < 0 ? 0 : r - p, c1 = r + p > nr - 1 ? nr - 1 : r + p;
+            for (int c = c0; c <= c1; c++)
+                if (dof_fixed[c])
+                    s -= entry(m, r, c) * x[c];
+        }
+        y[r] = s;
+    }
+
     /* L z = y, then L^T x = z, both in y. */
     for (int r = 0; r < nr; r++) {
         int c0 = r - p < 0 ? 0 : r - p;
@@ -152,7 +163,23 @@ int ns_banded_solve(const NsBanded *m, const uint8_t *dof_fixed, const double *b
         y[r] = s / LF(r, r);
     }
 #undef LF
+}
+
+int ns_banded_solve_factored(const NsBanded *m, const uint8_t *dof_fixed, const double *b,
+                             double *x, double *work)
+{
+    const int nr = 3 * m->n;
+    double *y = work ? work : m->fac + (size_t)nr * (size_t)(scalar_band(m) + 1);
+    solve_band(m, dof_fixed, b, x, y);
     /* Fixed entries come out exactly as they went in (identity rows, zero couplings). */
     memcpy(x, y, (size_t)nr * sizeof(double));
     return 0;
+}
+
+int ns_banded_solve(const NsBanded *m, const uint8_t *dof_fixed, const double *b, double *x,
+                    double *work)
+{
+    if (ns_banded_factor(m, dof_fixed))
+        return -1; /* x unchanged */
+    return ns_banded_solve_factored(m, dof_fixed, b, x, work);
 }

@@ -44,4 +44,12 @@ void ns_banded_mul(const NsBanded *m, const double *x, double *y);
 int ns_banded_solve(const NsBanded *m, const uint8_t *dof_fixed, const double *b, double *x,
                     double *work);
 
+/* ns_banded_solve in two parts, for many right-hand sides with one matrix: the factor into m's
+ * buffer (0, or -1 if A_ff is not positive definite), then solves with it, each the same bits
+ * as ns_banded_solve's. A solve uses the factor of the last ns_banded_factor of m, which the
+ * caller keeps current (the same values and dof_fixed); it always returns 0. */
+int ns_banded_factor(const NsBanded *m, const uint8_t *dof_fixed);
+int ns_banded_solve_factored(const NsBanded *m, const uint8_t *dof_fixed, const double *b,
+                             double *x, double *work);
+
 #endif

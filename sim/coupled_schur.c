@@ -391,8 +391,7 @@ static int build_compliance(CoupledSchur *w, const CoupledSystem *S, double *nsc
         const double *r = frame_col(S, j);
         for (int i = 0; i < 3; i++)
             nscratch[3 * S->idx[j / 3] + i] = r[i];
-        if (ns_banded_solve(S->Ar, S->rfixed, nscratch, z, NULL))
-            return -1;
+        ns_banded_solve_factored(S->Ar, S->rfixed, nscratch, z, NULL); /* factored in _lcp */
         for (int k = 0; k < S->q; k++)
             for (int c1 = 0; c1 < 3; c1++) {
                 const double *r1 = frame_col(S, 3 * k + c1);
@@ -606,8 +605,7 @@ static int project(const CoupledSchur *w, const CoupledSystem *S, const double *
     if (ns_solver_precondition(w->fac, nt3, r, g))
         return -1;
     memset(g + nt3, 0, (size_t)S->nr3 * sizeof *g);
-    if (ns_banded_solve(S->Ar, S->rfixed, r + nt3, g + nt3, NULL))
-        return -1;
+    ns_banded_solve_factored(S->Ar, S->rfixed, r + nt3, g + nt3, NULL);
     constraint_rows(S, g, g + nt3, h);
     active_solve(w, S, h, v, tmp);
     add_response(w, S, v, g, g + nt3);
@@ -856,6 +854,10 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
         rc = refactor(w, S, st);
         w->refreshed = rc == 0;
     }
+    /* The needle's band matrix is the same through the whole LCP: factored once here for the
+     * compliance's 3q solves and one solve per PCG iteration. */
+    if (rc == 0 && ns_banded_factor(S->Ar, S->rfixed))
+        rc = -1;
     if (rc == 0 && (cache_fill(w, S) || build_compliance(w, S, nscratch)))
         rc = -1;
     TriedSet T = {0, 0, q, NULL};

@@ -226,6 +226,20 @@ static int fixed_dofs_honored(void)
         }
         ENSURE(dense_solve(nr, Am, bm, ref) == 0);
         ENSURE_SMALL(rel_err(nr, x, ref), 1e-10);
+        /* Factored once, solved for several right-hand sides (the coupled solve's way): each
+         * the bits of a whole ns_banded_solve. */
+        ENSURE(ns_banded_factor(&m, fixed) == 0);
+        for (int j = 0; j < 3; j++) {
+            double *x1 = ref, *x2 = bm; /* reused as scratch */
+            for (int k = 0; k < nr; k++) {
+                b[k] = rnd(&st);
+                x1[k] = x2[k] = x0[k];
+            }
+            ENSURE(ns_banded_solve_factored(&m, fixed, b, x1, NULL) == 0);
+            ENSURE(ns_banded_solve(&m, fixed, b, x2, NULL) == 0);
+            ENSURE(memcmp(x1, x2, (size_t)nr * sizeof(double)) == 0);
+            ENSURE(ns_banded_factor(&m, fixed) == 0); /* ns_banded_solve refactored in place */
+        }
         free(A), free(fixed), free(b), free(x), free(x0), free(ref), free(Am), free(bm);
         ns_banded_free(&m);
     }
