@@ -98,7 +98,7 @@ struct NsSolver {
     /* The same numbering the other way: free DOF f is scalar DOF dof_src[f] (nfree of the
      * last numbering), and the fixed ones, dof_held[0..nheld). */
     int *dof_src, *dof_held;
-    int nheld, src_cap, held_cap;
+    int nsrc, nheld, src_cap, held_cap;
     double *work; /* 5 vectors of 3n for CG, then the chunk partial sums */
     int work_cap;
 };
@@ -323,6 +323,7 @@ static int number_dofs(NsSolver *s, int n, const uint8_t *fixed)
         else
             s->dof_src[f++] = i;
     }
+    s->nsrc = f;
     s->nheld = h;
     return f;
 }
@@ -551,6 +552,8 @@ static int loop_threads(const NsSolver *s)
 /* z = L^-1 r on the free DOFs of full-length vectors. */
 static int apply_factor(NsSolver *s, int n3, const double *r, double *z)
 {
+    if (s->nsrc != s->nfree)
+        return -1; /* numbered since the factor's analysis for another count of free DOFs */
     if (s->B && s->B->nrow != (size_t)s->nfree)
         cholmod_free_dense(&s->B, &s->cm);
     if (!s->B) {
@@ -579,8 +582,8 @@ static int precondition(NsSolver *s, int n3, const double *r, double *z)
         s->sf = ns_super_from_cholmod(s->L);
         s->sf_tried = 1;
     }
-    if (!s->sf || ns_super_n(s->sf) != s->nfree || n3 != s->n3)
-        return apply_factor(s, n3, r, z); /* no copy */
+    if (!s->sf || ns_super_n(s->sf) != s->nfree || s->nsrc != s->nfree || n3 != s->n3)
+        return apply_factor(s, n3, r, z); /* no copy (or a numbering it does not fit) */
     /* Straight between the full-length vectors and the factor's numbering (dof_src), the held
      * entries zeroed after (r and z may be the same array). */
     ns_super_solve_at(s->sf, s->dof_src, r, z, loop_threads(s));

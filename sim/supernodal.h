@@ -36,8 +36,11 @@ void ns_super_free(NsSuperFactor *f);
 int ns_super_n(const NsSuperFactor *f);
 /* Stored values of the two-thread cut's parts: bin 0, bin 1, the top (tests, diagnostics). */
 void ns_super_cut(const NsSuperFactor *f, size_t entries[3]);
-/* x = (P^T L_f L_f^T P)^-1 b (b and x of length n, in the factored matrix's numbering; they
- * may be the same array), with up to `threads` threads (two are used at most). Not
+/* x ~ (P^T L_f L_f^T P)^-1 b, to the float rounding of the substitutions (b and x of length n,
+ * in the factored matrix's numbering; they may be the same array), with up to `threads`
+ * threads (two are used at most). b is scaled into floats' range, not the factor: the answer
+ * must itself fit floats once b is scaled, which holds while the matrix's eigenvalues stay
+ * well inside 1e-30..1e30 (the brachytherapy tissue factor's entries are at most 0.43). Not
  * re-entrant: the copy keeps its workspace. */
 void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads);
 /* The same with the factored matrix's entry k at b[at[k]] and x[at[k]] (at: n distinct
