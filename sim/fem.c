@@ -224,10 +224,16 @@ static void add_forces(const NsTetRest *r, const double g[12], const double P[9]
                                     P[3 * i + 2] * g[3 * a + 2]);
 }
 
+/* Whether the material damps at all (damping_forces does nothing otherwise). */
+static int has_damping(const NsFemMaterial *m)
+{
+    return !(m->damp_mu == 0.0 && m->damp_lambda == 0.0);
+}
+
 static void damping_forces(const NsTetRest *r, const NsFemMaterial *mat, const NsTetFrame *fr,
                            const double g[12], const double *const v[4], double f[12])
 {
-    if (mat->damp_mu == 0.0 && mat->damp_lambda == 0.0)
+    if (!has_damping(mat))
         return;
     double Fd[9], Fdh[9], Pdh[9], Pd[9];
     gradient_of(g, v, Fd);
@@ -286,7 +292,7 @@ void ns_fem_tet_forces_svd(const NsTetRest *r, const NsFemMaterial *mat, const d
  * a tet done alone. The model's diagonal stress (a logarithm for neo-Hookean) stays per tet. */
 #define FL 4
 
-/* M = sum_a y_a g_a^T (gradient_of) on the lanes. */
+/* The statement after it, once for each lane l. */
 #define LANES_FOR for (int l = 0; l < FL; l++)
 
 COLS_KERNEL static void forces_lanes(const NsTetRest *const r[FL], const NsFemMaterial *const m[FL],
@@ -421,13 +427,15 @@ void ns_fem_tet_forces_svd_n(int n, const NsTetRest *const r[], const NsFemMater
             ml[l] = mat[k];
             vl[l] = v[k];
             fl[l] = frame[k];
-            damp[l] = !(mat[k]->damp_mu == 0.0 && mat[k]->damp_lambda == 0.0);
+            damp[l] = has_damping(mat[k]);
         }
         forces_lanes(rl, ml, vl, fl, damp, out);
         for (int l = 0; l < FL && k0 + l < n; l++)
             memcpy(f[k0 + l], out[l], sizeof out[l]);
     }
 }
+#undef LANES_FOR
+#undef FL
 
 static void inverse3(const double *M, double *out)
 {
