@@ -56,6 +56,7 @@ void ns_tissue_free(NsTissue *t)
     free(t->part_node_start);
     free(t->part_nodes);
     free(t->part_tet_start);
+    free(t->part_next);
     free(t->part_tets);
     free(t->node_part);
     free(t->colpos);
@@ -399,6 +400,9 @@ static int partition(NsTissue *t, int parts)
     int *ts = realloc(t->part_tet_start, (size_t)(parts + 1) * sizeof(int));
     if (ts)
         t->part_tet_start = ts;
+    int *nx = realloc(t->part_next, (size_t)(2 * parts) * sizeof(int));
+    if (nx)
+        t->part_next = nx;
     int *pn = realloc(t->part_nodes, (size_t)(nn > 0 ? nn : 1) * sizeof(int));
     if (pn)
         t->part_nodes = pn;
@@ -410,7 +414,7 @@ static int partition(NsTissue *t, int parts)
     if (cp)
         t->colpos = cp;
     int *part = malloc((size_t)(nn > 0 ? nn : 1) * sizeof(int));
-    if (!ns || !ts || !pn || !pt || !cp || !part) {
+    if (!ns || !ts || !nx || !pn || !pt || !cp || !part) {
         free(part);
         return -1;
     }
@@ -730,6 +734,43 @@ static int node_rows(NsTissue *t, int i, int all_rows, int *colpos)
     return rc;
 }
 
+/* Dynamic load balance of the two phases. The tets near the needle rebuild their Jacobians and
+ * their block rows are gathered again, so a part's work depends on where the needle is, not only
+ * on its size: measured on the brachytherapy bench, the two threads' phase 1 differed by 1.6-2.9
+ * ms in many steps, one of them waiting at the barrier. So each part is cut into chunks, taken
+ * one at a time through an atomic counter per part: a thread takes its own parts' chunks first
+ * (p = tid, tid + nth, ...), then the others'. Every tet's phase-1 work writes only its own
+ * slots, and every node's phase-2 sums are made whole by whichever thread takes its chunk, in
+ * the order of its tet list: the result is the same bits whoever does which chunk. */
+#define TET_CHUNK  512
+#define NODE_CHUNK 128
+
+/* The next chunk for thread tid: chunk index c (part c % parts, its c / parts-th chunk of
+ * size), or -1 when every part is done. counters: one per part. */
+static int next_chunk(int *counters, int parts, int tid, int nth, const int *start, int size)
+{
+    for (int round = 0; round < 2; round++)
+        for (int q = 0; q < parts; q++) {
+            int p = (tid + q) % parts;
+            if ((round == 0) != (p % nth == tid % nth)) /* own parts first, then the rest */
+                continue;
+            int n = (start[p + 1] - start[p] + size - 1) / size, k;
+#if NS_HAVE_OPENMP
+#pragma omp atomic read
+#endif
+            k = counters[p];
+            if (k >= n) /* done: no increment, so the counters stay small */
+                continue;
+#if NS_HAVE_OPENMP
+#pragma omp atomic capture
+#endif
+            k = counters[p]++;
+            if (k < n)
+                return k * parts + p;
+        }
+    return -1;
+}
+
 void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
 {
     double t0 = now_ms();
@@ -769,6 +810,10 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
         nan = c.nan;
         tj = c.jacobian_ms + now_ms() - tr;
     } else {
+        /* Chunks taken so far of each part's tets (next[p]) and nodes (next[parts + p]). */
+        int *next = t->part_next;
+        for (int p = 0; p < 2 * parts; p++)
+            next[p] = 0;
 #if NS_HAVE_OPENMP
 #pragma omp parallel num_threads(threads) reduction(+ : alive, updated, inverted, nan)           \
     reduction(| : failed) reduction(max : tj)
@@ -779,28 +824,39 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
             tid = omp_get_thread_num();
             nth = omp_get_num_threads();
 #endif
-            /* OpenMP may give fewer threads than parts: each thread takes every nth part. */
+            /* Each thread works through its own parts' chunks, then takes what is left of
+             * the others' (stealing, below). */
             AssemblyCounts c = {0};
-            for (int p = tid; p < parts; p += nth)
-                tet_phase_n(t, t->part_tets + t->part_tet_start[p],
-                            t->part_tet_start[p + 1] - t->part_tet_start[p], &c);
+            int chunk;
+            while ((chunk = next_chunk(next, parts, tid, nth, t->part_tet_start, TET_CHUNK)) >= 0) {
+                int p = chunk % parts, lo = t->part_tet_start[p] + chunk / parts * TET_CHUNK;
+                int hi = t->part_tet_start[p + 1] < lo + TET_CHUNK ? t->part_tet_start[p + 1]
+                                                                   : lo + TET_CHUNK;
+                tet_phase_n(t, t->part_tets + lo, hi - lo, &c);
+            }
 #if NS_HAVE_OPENMP
 #pragma omp barrier
 #endif
-            for (int p = tid; p < parts; p += nth)
-                for (int k = t->part_node_start[p]; k < t->part_node_start[p + 1]; k++)
-                    node_force(t, t->part_nodes[k]);
-            double tr = now_ms();
+            double gather = 0.0;
             int *colpos = t->colpos + (size_t)tid * ncol;
-            for (int p = tid; p < parts; p += nth)
-                for (int k = t->part_node_start[p]; k < t->part_node_start[p + 1]; k++)
+            while ((chunk = next_chunk(next + parts, parts, tid, nth, t->part_node_start,
+                                       NODE_CHUNK)) >= 0) {
+                int p = chunk % parts, lo = t->part_node_start[p] + chunk / parts * NODE_CHUNK;
+                int hi = t->part_node_start[p + 1] < lo + NODE_CHUNK ? t->part_node_start[p + 1]
+                                                                     : lo + NODE_CHUNK;
+                for (int k = lo; k < hi; k++)
+                    node_force(t, t->part_nodes[k]);
+                double g0 = now_ms();
+                for (int k = lo; k < hi; k++)
                     if (t->part_nodes[k] < nn)
                         failed |= node_rows(t, t->part_nodes[k], all_rows, colpos) != 0;
+                gather += now_ms() - g0;
+            }
             alive += c.alive;
             updated += c.updated;
             inverted += c.inverted;
             nan += c.nan;
-            double mine = c.jacobian_ms + now_ms() - tr;
+            double mine = c.jacobian_ms + gather;
             tj = mine > tj ? mine : tj;
         }
     }

@@ -95,6 +95,7 @@ typedef struct NsTissue {
     int *part_nodes;      /* (node_slots) */
     int *part_tet_start;  /* (part_count + 1) */
     int *part_tets;       /* (alive tets) */
+    int *part_next;       /* (2 part_count) chunks taken of each part's tets, then nodes */
     int *node_part;       /* (node_part_cap) the part of each node slot at the last partition */
     int node_part_cap;
     int part_metis_age; /* partitions since METIS last ran (the others are patched) */
