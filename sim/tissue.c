@@ -20,6 +20,8 @@
 /* Entries of a tet's Jacobian strip for one node: its three rows of dF/dx, then of dF/dv
  * (NsTissue.tet_jac). */
 #define JAC_STRIP 72
+/* Calls between full gathers of K and D (see ns_tissue_forces). */
+#define KD_REGATHER 256
 
 NsTissueParams ns_default_tissue_params(void)
 {
@@ -51,6 +53,8 @@ void ns_tissue_free(NsTissue *t)
     free(t->jprod);
     free(t->jvalid);
     free(t->jnew);
+    free(t->djac_slot);
+    free(t->djac);
     free(t->tet_force);
     free(t->tet_jac);
     free(t->part_node_start);
@@ -90,6 +94,7 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     t->jprod = calloc((size_t)(nt > 0 ? nt : 1) * 9, sizeof(double));
     t->jvalid = calloc((size_t)(nt > 0 ? nt : 1), 1);
     t->jnew = calloc((size_t)(nt > 0 ? nt : 1), 1);
+    t->djac_slot = calloc((size_t)(nt > 0 ? nt : 1), sizeof(int));
     t->tet_force = calloc((size_t)(nt > 0 ? nt : 1) * 12, sizeof(double));
     t->tet_jac = calloc((size_t)(nt > 0 ? nt : 1) * 288, sizeof(double));
     t->mass = calloc((size_t)(nn > 0 ? nn : 1), sizeof(double));
@@ -100,8 +105,8 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     ns_bsm_init(&t->D);
     ns_bsm_init(&t->A);
     if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jprod || !t->jvalid ||
-        !t->jnew || !t->tet_force || !t->tet_jac || !t->mass || !t->force || !t->dof_fixed ||
-        !t->work || ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) ||
+        !t->jnew || !t->djac_slot || !t->tet_force || !t->tet_jac || !t->mass || !t->force ||
+        !t->dof_fixed || !t->work || ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) ||
         ns_bsm_resize(&t->A, nn)) {
         ns_set_err(err, err_sz, "out of memory");
         ns_tissue_free(t);
@@ -188,6 +193,7 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             grow_zero((void **)&t->jprod, old, cap, 9 * sizeof(double)) ||
             grow_zero((void **)&t->jvalid, old, cap, 1) ||
             grow_zero((void **)&t->jnew, old, cap, 1) ||
+            grow_zero((void **)&t->djac_slot, old, cap, sizeof(int)) ||
             grow_zero((void **)&t->tet_force, old, cap, 12 * sizeof(double)) ||
             grow_zero((void **)&t->tet_jac, old, cap, 288 * sizeof(double)) ||
             grow_zero((void **)&t->rest_region, old, cap, sizeof(int))) {
@@ -308,11 +314,14 @@ static int needs_projection(const NsTetFrame *f)
  *      (kept between steps: the lazy update never has to rebuild an old contribution to
  *      take it out again);
  *   2. per node: its force is the sum of its incident tets' force rows, and a block row of K
- *      and D touched by a rebuilt tet is zeroed and summed again from the incident tets.
+ *      and D touched by a rebuilt tet takes that tet's change (new minus old, computed in
+ *      phase 1), as the paper's incremental update does; a row whose tets changed in number or
+ *      shape (remeshing), or one whose change was not kept, is zeroed and summed again.
  * Every sum in phase 2 runs over the mesh's node->tet list in list order, so the result does not
- * depend on which thread did what. Rebuilding a row from scratch also avoids the round-off drift
- * of subtracting an old contribution and adding a new one. Block row i of K and D is written
- * only by the thread that owns node i (ns_bsm_get(m, i, j) grows row i alone). */
+ * depend on which thread did what. Adding changes drifts from a fresh sum by one rounding per
+ * change (1e-15 relative in tests/test_threads.c), so every row is summed afresh every
+ * KD_REGATHER calls. Block row i of K and D is written only by the thread that takes node i
+ * (ns_bsm_get(m, i, j) grows row i alone). */
 
 /* The part owning most of the tet's nodes (ties: the one met first in the tet's node order). */
 static int tet_part(const int *part, const int *tn)
@@ -538,7 +547,8 @@ static int partition(NsTissue *t, int parts)
 
 typedef struct AssemblyCounts {
     int alive, updated, inverted, nan;
-    double jacobian_ms; /* time spent on Jacobians by one thread */
+    int rows_gathered, rows_changed; /* block rows of K and D summed again / by changes */
+    double jacobian_ms;              /* time spent on Jacobians by one thread */
 } AssemblyCounts;
 
 /* Phase 1 for tet e after its forces (tet_phase_n): their check, and its Jacobians when due.
@@ -563,9 +573,28 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
         double K[144], D[144], *J = t->tet_jac + 288 * (size_t)e;
         ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e], needs_projection(&t->frame[e]),
                              K, D);
+        /* The change since the Jacobians its rows hold (a valid tet's last ones), for phase 2 to
+         * add instead of gathering the rows again. Which tet gets which slot depends on the
+         * threads, but not whether all fit: if more changed than djac holds, phase 2 gathers
+         * every touched row (the same on any thread count), and djac grows for the next call. */
+        int slot = -1;
+        if (t->jvalid[e]) {
+#if NS_HAVE_OPENMP
+#pragma omp atomic capture
+#endif
+            slot = t->djac_count++;
+        }
+        t->djac_slot[e] = slot;
+        double *dJ = slot >= 0 && slot < t->djac_cap ? t->djac + 288 * (size_t)slot : NULL;
         for (int a = 0; a < 4; a++) { /* node a's strips side by side: see JAC_STRIP */
-            memcpy(J + JAC_STRIP * a, K + 36 * a, 36 * sizeof(double));
-            memcpy(J + JAC_STRIP * a + 36, D + 36 * a, 36 * sizeof(double));
+            double *Ja = J + JAC_STRIP * a;
+            if (dJ)
+                for (int k = 0; k < 36; k++) {
+                    dJ[JAC_STRIP * a + k] = K[36 * a + k] - Ja[k];
+                    dJ[JAC_STRIP * a + 36 + k] = D[36 * a + k] - Ja[36 + k];
+                }
+            memcpy(Ja, K + 36 * a, 36 * sizeof(double));
+            memcpy(Ja + 36, D + 36 * a, 36 * sizeof(double));
         }
         t->jframe[e] = t->frame[e];
         memcpy(jprod, prod, sizeof prod);
@@ -674,22 +703,70 @@ static void add_block(double *restrict kb, double *restrict db, const double *re
         }
 }
 
-/* Phase 2, block row i of K and D, gathered again if an incident tet was rebuilt, its list of
- * tets changed since the last gather (remeshing: mesh.node_changed), or all_rows:
- * zeroed, then every incident tet's blocks (i, j) added in node->tet list order. colpos (node
- * slots, all -1, may be NULL) maps a column to its position in the row while the row is
+/* Phase 2, block row i of K and D by differences (§3.6.3: only the rebuilt tets'
+ * contributions change): each rebuilt incident tet's change in node-tet list order, its column
+ * positions found through colpos. Returns 0, or -1 when the row cannot take them that way (no
+ * scratch, K's and D's patterns differ, a column missing): the caller gathers it. */
+static int row_add_changes(NsTissue *t, int i, int *colpos)
+{
+    const NsMesh *M = &t->mesh;
+    const NsIntList *l = &M->node_tets[i];
+    NsBlockRow *kr = &t->K.rows[i], *dr = &t->D.rows[i];
+    if (!colpos || kr->count != dr->count ||
+        memcmp(kr->col, dr->col, (size_t)kr->count * sizeof(int)) != 0)
+        return -1;
+    for (int p = 0; p < kr->count; p++)
+        colpos[kr->col[p]] = p;
+    int ok = 1;
+    for (int q = 0; q < l->count && ok; q++) {
+        int e = l->items[q];
+        const int *tn = M->tet_node + 4 * e;
+        ok = !t->jnew[e] ||
+             (colpos[tn[0]] >= 0 && colpos[tn[1]] >= 0 && colpos[tn[2]] >= 0 && colpos[tn[3]] >= 0);
+    }
+    for (int q = 0; q < l->count && ok; q++) {
+        int e = l->items[q];
+        if (!t->jnew[e])
+            continue;
+        const int *tn = M->tet_node + 4 * e;
+        const double *Ke = t->djac + 288 * (size_t)t->djac_slot[e] + JAC_STRIP * local_index(tn, i);
+        for (int b = 0; b < 4; b++)
+            add_block(kr->val + 9 * colpos[tn[b]], dr->val + 9 * colpos[tn[b]], Ke + 3 * b,
+                      Ke + 36 + 3 * b);
+    }
+    for (int p = 0; p < kr->count; p++)
+        colpos[kr->col[p]] = -1;
+    return ok ? 0 : -1;
+}
+
+/* Phase 2, block row i of K and D: if incident tets were rebuilt and all their changes were
+ * kept, those changes are added (row_add_changes); gathered again if its list of tets changed
+ * since the last gather (remeshing: mesh.node_changed), a rebuilt tet's change was not kept, or
+ * all_rows: zeroed, then every incident tet's blocks (i, j) added in node->tet list order. colpos
+ * (node slots, all -1, may be NULL) maps a column to its position in the row while the row is
  * gathered, which saves a search per block when K and D already store every block the tets
  * need (always, after the first gather); otherwise blocks are found, or inserted, one by one.
  * Returns -1 if a block could not be stored (memory), else 0. */
-static int node_rows(NsTissue *t, int i, int all_rows, int *colpos)
+static int node_rows(NsTissue *t, int i, int all_rows, int *colpos, AssemblyCounts *c)
 {
     const NsMesh *M = &t->mesh;
     const NsIntList *l = (M->flags[i] & NS_NODE_ALIVE) ? &M->node_tets[i] : NULL;
     int n = l ? l->count : 0, dirty = all_rows || M->node_changed[i] > t->kd_version;
-    for (int q = 0; q < n && !dirty; q++)
-        dirty = t->jnew[l->items[q]];
-    if (!dirty)
+    int changed = 0; /* rebuilt tets, all with their change kept */
+    for (int q = 0; q < n && !dirty; q++) {
+        int e = l->items[q];
+        if (t->jnew[e]) {
+            changed = 1;
+            dirty = t->djac_slot[e] < 0 || t->djac_count > t->djac_cap;
+        }
+    }
+    if (!dirty && changed && row_add_changes(t, i, colpos) == 0) {
+        c->rows_changed++;
         return 0;
+    }
+    if (!dirty && !changed)
+        return 0;
+    c->rows_gathered++;
     NsBlockRow *kr = &t->K.rows[i], *dr = &t->D.rows[i];
     if (kr->count)
         memset(kr->val, 0, (size_t)kr->count * 9 * sizeof(double));
@@ -779,15 +856,20 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
     if (force_all)
         memset(t->jvalid, 0, (size_t)M->tet_slots);
     /* After a topology change only the rows of nodes whose tets changed are gathered again
-     * (node_rows: their removed tets' blocks go to zero); a row gathered again sums the same
-     * blocks in the same order as a full gather, so the result does not depend on it. */
-    int all_rows = force_all || !t->kd_valid;
+     * (node_rows: their removed tets' blocks go to zero), the rows of rebuilt tets take their
+     * changes, the others are left. Which rows do what depends on the mesh and its history,
+     * never on the threads. Rows taken by changes drift from a fresh sum by round-off, one
+     * rounding per change: every KD_REGATHER calls every row is gathered again. */
+    int all_rows = force_all || !t->kd_valid || t->kd_age >= KD_REGATHER;
+    t->kd_age = all_rows ? 0 : t->kd_age + 1;
+    t->djac_count = 0;
     int nn = M->node_slots < t->K.n ? M->node_slots : t->K.n;
     int parts = partition(t, threads) == 0 ? t->part_count : 0;
     size_t ncol = (size_t)(t->K.n > M->node_slots ? t->K.n : M->node_slots);
-    int alive = 0, updated = 0, inverted = 0, nan = 0, failed = 0;
+    int alive = 0, updated = 0, inverted = 0, nan = 0, failed = 0, gathered = 0, by_change = 0;
     double tj = 0.0;
-    if (parts == 0) { /* no memory for the partition: the same work, serially by index */
+    if (parts == 0) { /* no memory for the partition: serially by index, every touched row
+                         gathered (no column scratch for the changes) */
         AssemblyCounts c = {0};
         int batch[SVD_BATCH], nb = 0;
         for (int e = 0; e < M->tet_slots; e++)
@@ -803,9 +885,11 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
         for (int i = 0; i < M->node_slots; i++)
             node_force(t, i);
         for (int i = 0; i < nn; i++)
-            failed |= node_rows(t, i, all_rows, NULL) != 0;
+            failed |= node_rows(t, i, all_rows, NULL, &c) != 0;
         alive = c.alive;
         updated = c.updated;
+        gathered = c.rows_gathered;
+        by_change = c.rows_changed;
         inverted = c.inverted;
         nan = c.nan;
         tj = c.jacobian_ms + now_ms() - tr;
@@ -815,8 +899,9 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
         for (int p = 0; p < 2 * parts; p++)
             next[p] = 0;
 #if NS_HAVE_OPENMP
-#pragma omp parallel num_threads(threads) reduction(+ : alive, updated, inverted, nan)           \
-    reduction(| : failed) reduction(max : tj)
+#pragma omp parallel num_threads(threads)                                                         \
+    reduction(+ : alive, updated, inverted, nan, gathered, by_change) reduction(| : failed)        \
+    reduction(max : tj)
 #endif
         {
             int tid = 0, nth = 1;
@@ -849,11 +934,13 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
                 double g0 = now_ms();
                 for (int k = lo; k < hi; k++)
                     if (t->part_nodes[k] < nn)
-                        failed |= node_rows(t, t->part_nodes[k], all_rows, colpos) != 0;
+                        failed |= node_rows(t, t->part_nodes[k], all_rows, colpos, &c) != 0;
                 gather += now_ms() - g0;
             }
             alive += c.alive;
             updated += c.updated;
+            gathered += c.rows_gathered;
+            by_change += c.rows_changed;
             inverted += c.inverted;
             nan += c.nan;
             double mine = c.jacobian_ms + gather;
@@ -864,11 +951,22 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
      * mesh grew) were not gathered: gather every row again next time. */
     t->kd_valid = !failed && nn == M->node_slots;
     t->kd_version = M->topology_version;
+    /* Room for this call's changes next time (a tet without a slot had its rows gathered). */
+    if (t->djac_count > t->djac_cap) {
+        int cap = t->djac_count + t->djac_count / 4;
+        double *d = realloc(t->djac, (size_t)cap * 288 * sizeof(double));
+        if (d) {
+            t->djac = d;
+            t->djac_cap = cap;
+        }
+    }
     if (stats) {
         double total = now_ms() - t0;
         stats->jacobian_ms += tj;
         stats->force_ms += total > tj ? total - tj : 0.0;
         stats->jacobian_fraction = alive ? (double)updated / alive : 0.0;
+        stats->rows_gathered = gathered;
+        stats->rows_changed = by_change;
         stats->inverted = inverted;
         stats->nan_count += nan;
     }

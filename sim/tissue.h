@@ -52,6 +52,8 @@ typedef struct NsTissueStats {
     int factorized;           /* the solver factored this step's matrix and used it */
     int refresh_started;      /* the solver scheduled a background refactorization (solver.h) */
     double jacobian_fraction; /* fraction of tets whose Jacobian was rebuilt this step */
+    int rows_gathered;        /* block rows of K and D summed again from their tets */
+    int rows_changed;         /* block rows updated by their rebuilt tets' changes */
     int nan_count;            /* non-finite values caught (the step is rejected) */
     int inverted;             /* tets with det F <= 0 after the step */
     int unconverged;          /* linear solves that missed their tolerance */
@@ -69,7 +71,15 @@ typedef struct NsTissue {
                            lazy update's reference, kept rather than formed again every step */
     uint8_t *jvalid;    /* (tet_slots) 1 if tet_jac holds its Jacobians at jframe */
     uint8_t *jnew;      /* (tet_slots) 1 if its Jacobians were rebuilt by the last call */
-    double *tet_force;  /* (tet_slots x 12) element forces of the last evaluation [N] */
+    /* The last call's changes of the rebuilt tets' Jacobians (new minus old, laid out as
+     * tet_jac), which phase 2 adds to their rows instead of gathering them again: djac_slot[e]
+     * (tet_slots) is tet e's slot in djac (djac_cap slots), -1 if it has none (then its rows
+     * are gathered); djac_count the slots the call asked for. */
+    double *djac;
+    int *djac_slot;
+    int djac_cap, djac_count;
+    int kd_age;        /* calls since every row of K and D was last gathered */
+    double *tet_force; /* (tet_slots x 12) element forces of the last evaluation [N] */
     /* (tet_slots x 288) the tet's element Jacobians at jframe, dF/dx [N/m] and dF/dv [N s/m],
      * each 12 x 12 row-major, stored by node: for local node a, rows 3a..3a+2 of dF/dx (36
      * entries) then the same rows of dF/dv, at 72 a (JAC_STRIP a). A block row of K and D
