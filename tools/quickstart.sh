@@ -82,7 +82,9 @@ test)
     }
     build build -Dbuildtype=debugoptimized -Dwerror=true
     runtests build
-    build build-asan -Dbuildtype=debug -Dwerror=true -Db_sanitize=address,undefined \
+    # The sanitizer build is optimized (-O2 -g): at -O0 its tests took ~28 of CI's minutes on a
+    # slow day, past the 30-minute budget; at -O2 13 minutes, the same tests, the same checks.
+    build build-asan -Dbuildtype=debugoptimized -Dwerror=true -Db_sanitize=address,undefined \
         -Db_lundef=false
     UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ASAN_OPTIONS=detect_leaks=1 runtests build-asan
     trap - EXIT
