@@ -100,10 +100,9 @@ static int settle(NsTissue *t)
  * (refreshed in the background when there are threads to spare) for a local one, the solver on
  * the tissue's thread count; reports the largest displacement over the run and
  * how many steps rebuilt some tets' Jacobians but fewer than a fraction `below` of them (the
- * steps that gather some block rows and keep others). Returns 0 or -1. */
-/* Steps t under a global or local load; *partial counts the steps that rebuilt some but fewer
- * than `below` of the tets, *by_change (may be NULL) the block rows of K and D updated by their
- * rebuilt tets' changes instead of gathered again. */
+ * steps that update some block rows and keep others), and into *by_change (may be NULL) how many
+ * block rows of K and D took their rebuilt tets' changes instead of being gathered again.
+ * Returns 0 or -1. */
 static int run_counted(NsTissue *t, int steps, int local, double below, double *moved, int *partial,
                        int *by_change)
 {
