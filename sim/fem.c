@@ -565,6 +565,45 @@ void ns_fem_tet_jacobians(const NsTetRest *r, const NsFemMaterial *mat, const Ns
     }
 }
 
+/* h_b = R g_b for the four shape-function gradients. */
+static void rotate_gradients(const double R[9], const double g[12], double h[12])
+{
+    for (int b = 0; b < 4; b++)
+        for (int i = 0; i < 3; i++)
+            h[3 * b + i] = R[3 * i + 0] * g[3 * b + 0] + R[3 * i + 1] * g[3 * b + 1] +
+                           R[3 * i + 2] * g[3 * b + 2];
+}
+
+void ns_fem_corot_row(const NsTetRest *r, const NsFemMaterial *mat, const double R[9],
+                      const double *R_old, int a, double *const kb[4], double *const db[4])
+{
+    double g[12], h[12], o[12];
+    shape_gradients(r, g);
+    rotate_gradients(R, g, h);
+    if (R_old)
+        rotate_gradients(R_old, g, o);
+    const double mw = -r->W, *ha = h + 3 * a, *oa = o + 3 * a, *ga = g + 3 * a;
+    for (int b = 0; b < 4; b++) {
+        /* P = h_b h_a^T (minus the old one): block (a, b) of K is -W [mu (g_a . g_b) I +
+         * mu P + lambda P^T] (§3.2: dP = mu (dF + R dF^T R) + lambda tr(R^T dF) R), of D the
+         * same with the damping coefficients; the identity term does not change with R. */
+        const double *hb = h + 3 * b, *ob = o + 3 * b, *gb = g + 3 * b;
+        double P[9];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                P[3 * i + j] = R_old ? hb[i] * ha[j] - ob[i] * oa[j] : hb[i] * ha[j];
+        double gg = R_old ? 0.0 : ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++) {
+                double d = i == j ? gg : 0.0;
+                kb[b][3 * i + j] +=
+                    mw * (mat->mu * (P[3 * i + j] + d) + mat->lambda * P[3 * j + i]);
+                db[b][3 * i + j] +=
+                    mw * (mat->damp_mu * (P[3 * i + j] + d) + mat->damp_lambda * P[3 * j + i]);
+            }
+    }
+}
+
 double ns_fem_tet_energy(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4])
 {
     double g[12], F[9], U[9], V[9], s[3];

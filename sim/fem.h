@@ -76,6 +76,16 @@ void ns_fem_tet_forces_fixed_frame(const NsTetRest *r, const NsFemMaterial *mat,
 void ns_fem_tet_jacobians(const NsTetRest *r, const NsFemMaterial *mat, const NsTetFrame *frame,
                           int project, double K[144], double D[144]);
 
+/* The corotational model's Jacobians in closed form, one block row at a time. With R = U V^T
+ * held fixed the stress is linear in F, so block (a, b) of dF/dx is
+ *   -W [mu (g_a . g_b) I + mu h_b h_a^T + lambda h_a h_b^T],  h_a = R g_a,
+ * (g_a the shape-function gradients) and of dF/dv the same with damp_mu and damp_lambda: what
+ * ns_fem_tet_jacobians gives for this model, to round-off, from 12 numbers a tet instead of 288.
+ * Adds blocks (a, b), b = 0..3, to kb[b] and db[b] (3 x 3 row-major); with R_old non-NULL, adds
+ * instead their change from rotation R_old to R (only the h terms change). */
+void ns_fem_corot_row(const NsTetRest *r, const NsFemMaterial *mat, const double R[9],
+                      const double *R_old, int a, double *const kb[4], double *const db[4]);
+
 /* Elastic energy of the tet [J] (for tests: forces are its negative gradient for neo-Hookean,
  * and for corotational with the frame held fixed). */
 double ns_fem_tet_energy(const NsTetRest *r, const NsFemMaterial *mat, const double *const x[4]);

@@ -55,6 +55,7 @@ void ns_tissue_free(NsTissue *t)
     free(t->jnew);
     free(t->djac_slot);
     free(t->djac);
+    free(t->jprod_old);
     free(t->tet_force);
     free(t->tet_jac);
     free(t->part_node_start);
@@ -92,6 +93,7 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     t->frame = calloc((size_t)(nt > 0 ? nt : 1), sizeof *t->frame);
     t->jframe = calloc((size_t)(nt > 0 ? nt : 1), sizeof *t->jframe);
     t->jprod = calloc((size_t)(nt > 0 ? nt : 1) * 9, sizeof(double));
+    t->jprod_old = calloc((size_t)(nt > 0 ? nt : 1) * 9, sizeof(double));
     t->jvalid = calloc((size_t)(nt > 0 ? nt : 1), 1);
     t->jnew = calloc((size_t)(nt > 0 ? nt : 1), 1);
     t->djac_slot = calloc((size_t)(nt > 0 ? nt : 1), sizeof(int));
@@ -104,10 +106,10 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     ns_bsm_init(&t->K);
     ns_bsm_init(&t->D);
     ns_bsm_init(&t->A);
-    if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jprod || !t->jvalid ||
-        !t->jnew || !t->djac_slot || !t->tet_force || !t->tet_jac || !t->mass || !t->force ||
-        !t->dof_fixed || !t->work || ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) ||
-        ns_bsm_resize(&t->A, nn)) {
+    if (!t->materials || !t->rest || !t->frame || !t->jframe || !t->jprod || !t->jprod_old ||
+        !t->jvalid || !t->jnew || !t->djac_slot || !t->tet_force || !t->tet_jac || !t->mass ||
+        !t->force || !t->dof_fixed || !t->work || ns_bsm_resize(&t->K, nn) ||
+        ns_bsm_resize(&t->D, nn) || ns_bsm_resize(&t->A, nn)) {
         ns_set_err(err, err_sz, "out of memory");
         ns_tissue_free(t);
         return -1;
@@ -191,6 +193,7 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             grow_zero((void **)&t->frame, old, cap, sizeof *t->frame) ||
             grow_zero((void **)&t->jframe, old, cap, sizeof *t->jframe) ||
             grow_zero((void **)&t->jprod, old, cap, 9 * sizeof(double)) ||
+            grow_zero((void **)&t->jprod_old, old, cap, 9 * sizeof(double)) ||
             grow_zero((void **)&t->jvalid, old, cap, 1) ||
             grow_zero((void **)&t->jnew, old, cap, 1) ||
             grow_zero((void **)&t->djac_slot, old, cap, sizeof(int)) ||
@@ -312,11 +315,13 @@ static int needs_projection(const NsTetFrame *f)
  * split the work in two phases with no shared accumulation at all:
  *   1. per tet: forces into tet_force, and for a stale tet its element K and D into tet_jac
  *      (kept between steps: the lazy update never has to rebuild an old contribution to
- *      take it out again);
+ *      take it out again); a corotational tet keeps only the rotation they are a closed form
+ *      of (jprod) and the one before it (jprod_old);
  *   2. per node: its force is the sum of its incident tets' force rows, and a block row of K
- *      and D touched by a rebuilt tet takes that tet's change (new minus old, computed in
- *      phase 1), as the paper's incremental update does; a row whose tets changed in number or
- *      shape (remeshing), or one whose change was not kept, is zeroed and summed again.
+ *      and D touched by a rebuilt tet takes that tet's change (new minus old: computed in
+ *      phase 1, or for a corotational tet here from its two rotations, ns_fem_corot_row), as
+ *      the paper's incremental update does; a row whose tets changed in number or shape
+ *      (remeshing), or one whose change was not kept, is zeroed and summed again.
  * Every sum in phase 2 runs over the mesh's node->tet list in list order, so the result does not
  * depend on which thread did what. Adding changes drifts from a fresh sum by one rounding per
  * change (1e-15 relative in tests/test_threads.c), so every row is summed afresh every
@@ -551,6 +556,38 @@ typedef struct AssemblyCounts {
     double jacobian_ms;              /* time spent on Jacobians by one thread */
 } AssemblyCounts;
 
+/* A rebuilt tet's element K and D (any model) into tet_jac, and their change into a slot of
+ * djac when it had valid ones. */
+static void elastic_jacobians(NsTissue *t, int e, const NsTissueMaterial *mat)
+{
+    double K[144], D[144], *J = t->tet_jac + 288 * (size_t)e;
+    ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e], needs_projection(&t->frame[e]), K,
+                         D);
+    /* The change since the Jacobians its rows hold (a valid tet's last ones), for phase 2 to
+     * add instead of gathering the rows again. Which tet gets which slot depends on the
+     * threads, but not whether all fit: if more changed than djac holds, phase 2 gathers
+     * every touched row (the same on any thread count), and djac grows for the next call. */
+    int slot = -1;
+    if (t->jvalid[e]) {
+#if NS_HAVE_OPENMP
+#pragma omp atomic capture
+#endif
+        slot = t->djac_count++;
+    }
+    t->djac_slot[e] = slot;
+    double *dJ = slot >= 0 && slot < t->djac_cap ? t->djac + 288 * (size_t)slot : NULL;
+    for (int a = 0; a < 4; a++) { /* node a's strips side by side: see JAC_STRIP */
+        double *Ja = J + JAC_STRIP * a;
+        if (dJ)
+            for (int k = 0; k < 36; k++) {
+                dJ[JAC_STRIP * a + k] = K[36 * a + k] - Ja[k];
+                dJ[JAC_STRIP * a + 36 + k] = D[36 * a + k] - Ja[36 + k];
+            }
+        memcpy(Ja, K + 36 * a, 36 * sizeof(double));
+        memcpy(Ja + 36, D + 36 * a, 36 * sizeof(double));
+    }
+}
+
 /* Phase 1 for tet e after its forces (tet_phase_n): their check, and its Jacobians when due.
  * Writes only tet e's own slots. */
 static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
@@ -570,32 +607,15 @@ static void tet_phase(NsTissue *t, int e, AssemblyCounts *c)
     t->jnew[e] = 0;
     if (!t->jvalid[e] || jacobian_change(prod, jprod) > t->params.lazy_threshold) {
         double tj0 = now_ms();
-        double K[144], D[144], *J = t->tet_jac + 288 * (size_t)e;
-        ns_fem_tet_jacobians(&t->rest[e], &mat->fem, &t->frame[e], needs_projection(&t->frame[e]),
-                             K, D);
-        /* The change since the Jacobians its rows hold (a valid tet's last ones), for phase 2 to
-         * add instead of gathering the rows again. Which tet gets which slot depends on the
-         * threads, but not whether all fit: if more changed than djac holds, phase 2 gathers
-         * every touched row (the same on any thread count), and djac grows for the next call. */
-        int slot = -1;
-        if (t->jvalid[e]) {
-#if NS_HAVE_OPENMP
-#pragma omp atomic capture
-#endif
-            slot = t->djac_count++;
-        }
-        t->djac_slot[e] = slot;
-        double *dJ = slot >= 0 && slot < t->djac_cap ? t->djac + 288 * (size_t)slot : NULL;
-        for (int a = 0; a < 4; a++) { /* node a's strips side by side: see JAC_STRIP */
-            double *Ja = J + JAC_STRIP * a;
-            if (dJ)
-                for (int k = 0; k < 36; k++) {
-                    dJ[JAC_STRIP * a + k] = K[36 * a + k] - Ja[k];
-                    dJ[JAC_STRIP * a + 36 + k] = D[36 * a + k] - Ja[36 + k];
-                }
-            memcpy(Ja, K + 36 * a, 36 * sizeof(double));
-            memcpy(Ja + 36, D + 36 * a, 36 * sizeof(double));
-        }
+        if (mat->fem.model == NS_MODEL_COROTATIONAL) {
+            /* The corotational Jacobians are a closed form in R = jprod (ns_fem_corot_row):
+             * phase 2 makes the rows, or their change, from it and the old R kept here, with
+             * no 288-entry element matrices written and read back (on the brachytherapy
+             * bench the rebuilds come in waves of up to half the tets). */
+            memcpy(t->jprod_old + 9 * (size_t)e, jprod, 9 * sizeof(double));
+            t->djac_slot[e] = t->jvalid[e] ? NS_TISSUE_CLOSED_FORM : -1;
+        } else
+            elastic_jacobians(t, e, mat);
         t->jframe[e] = t->frame[e];
         memcpy(jprod, prod, sizeof prod);
         t->jvalid[e] = 1;
@@ -682,6 +702,12 @@ static void node_force(NsTissue *t, int i)
 static void prefetch_strip(const NsTissue *t, int e, int i)
 {
 #if defined(__GNUC__)
+    if (t->materials[t->mesh.tet_region[e]].fem.model == NS_MODEL_COROTATIONAL) {
+        /* its rows come from R and the rest data (ns_fem_corot_row) */
+        __builtin_prefetch(t->jprod + 9 * (size_t)e);
+        __builtin_prefetch(&t->rest[e]);
+        return;
+    }
     const char *p = (const char *)(t->tet_jac + 288 * (size_t)e +
                                    JAC_STRIP * local_index(t->mesh.tet_node + 4 * e, i));
     for (int z = 0; z < JAC_STRIP * (int)sizeof(double); z += 64)
@@ -729,6 +755,17 @@ static int row_add_changes(NsTissue *t, int i, int *colpos)
         if (!t->jnew[e])
             continue;
         const int *tn = M->tet_node + 4 * e;
+        if (t->djac_slot[e] == NS_TISSUE_CLOSED_FORM) {
+            double *kb[4], *db[4];
+            for (int b = 0; b < 4; b++) {
+                kb[b] = kr->val + 9 * colpos[tn[b]];
+                db[b] = dr->val + 9 * colpos[tn[b]];
+            }
+            ns_fem_corot_row(&t->rest[e], &t->materials[M->tet_region[e]].fem,
+                             t->jprod + 9 * (size_t)e, t->jprod_old + 9 * (size_t)e,
+                             local_index(tn, i), kb, db);
+            continue;
+        }
         const double *Ke = t->djac + 288 * (size_t)t->djac_slot[e] + JAC_STRIP * local_index(tn, i);
         for (int b = 0; b < 4; b++)
             add_block(kr->val + 9 * colpos[tn[b]], dr->val + 9 * colpos[tn[b]], Ke + 3 * b,
@@ -757,7 +794,8 @@ static int node_rows(NsTissue *t, int i, int all_rows, int *colpos, AssemblyCoun
         int e = l->items[q];
         if (t->jnew[e]) {
             changed = 1;
-            dirty = t->djac_slot[e] < 0 || t->djac_count > t->djac_cap;
+            dirty = t->djac_slot[e] != NS_TISSUE_CLOSED_FORM &&
+                    (t->djac_slot[e] < 0 || t->djac_count > t->djac_cap);
         }
     }
     if (!dirty && changed && row_add_changes(t, i, colpos) == 0) {
@@ -790,6 +828,28 @@ static int node_rows(NsTissue *t, int i, int all_rows, int *colpos, AssemblyCoun
         int a = local_index(tn, i);
         if (q + 1 < n)
             prefetch_strip(t, l->items[q + 1], i);
+        if (t->materials[M->tet_region[e]].fem.model == NS_MODEL_COROTATIONAL) {
+            /* closed form (ns_fem_corot_row): nothing stored in tet_jac */
+            double kl[4][9] = {{0}}, dl[4][9] = {{0}}, *kb[4], *db[4];
+            for (int b = 0; b < 4; b++) {
+                kb[b] = fast ? kr->val + 9 * colpos[tn[b]] : kl[b];
+                db[b] = fast ? dr->val + 9 * colpos[tn[b]] : dl[b];
+            }
+            ns_fem_corot_row(&t->rest[e], &t->materials[M->tet_region[e]].fem,
+                             t->jprod + 9 * (size_t)e, NULL, a, kb, db);
+            for (int b = 0; b < 4 && !fast; b++) {
+                double *kg = ns_bsm_get(&t->K, i, tn[b]), *dg = ns_bsm_get(&t->D, i, tn[b]);
+                if (!kg || !dg) {
+                    rc = -1;
+                    continue;
+                }
+                for (int k = 0; k < 9; k++) {
+                    kg[k] += kl[b][k];
+                    dg[k] += dl[b][k];
+                }
+            }
+            continue;
+        }
         const double *Ke = t->tet_jac + 288 * (size_t)e + JAC_STRIP * a, *De = Ke + 36;
         if (fast) {
             for (int b = 0; b < 4; b++)

@@ -59,6 +59,9 @@ typedef struct NsTissueStats {
     int unconverged;          /* linear solves that missed their tolerance */
 } NsTissueStats;
 
+/* djac_slot of a rebuilt corotational tet whose change its rows take in closed form. */
+#define NS_TISSUE_CLOSED_FORM 0x7fffffff
+
 typedef struct NsTissue {
     NsMesh mesh; /* owned */
     NsTissueParams params;
@@ -77,6 +80,10 @@ typedef struct NsTissue {
      * are gathered); djac_count the slots the call asked for. */
     double *djac;
     int *djac_slot;
+    /* (tet_slots x 9) a rebuilt corotational tet's jprod before the rebuild: its rows take the
+     * change in closed form (ns_fem_corot_row, djac_slot NS_TISSUE_CLOSED_FORM) instead of from
+     * djac, and its element Jacobians are never stored in tet_jac */
+    double *jprod_old;
     int djac_cap, djac_count;
     int kd_age;        /* calls since every row of K and D was last gathered */
     double *tet_force; /* (tet_slots x 12) element forces of the last evaluation [N] */

@@ -345,10 +345,84 @@ static int batch_forces_match_single(void)
     return 0;
 }
 
+/* The rest data of tet u and the frame of its state x (at rest velocity). */
+static int frame_at(const double u[12], const double x[12], const NsFemMaterial *m, NsTetRest *r,
+                    NsTetFrame *fr)
+{
+    const double *pu[4], *px[4], *pv[4];
+    for (int a = 0; a < 4; a++) {
+        pu[a] = u + 3 * a;
+        px[a] = x + 3 * a;
+        pv[a] = zero_v + 3 * a;
+    }
+    double f[12];
+    if (ns_fem_rest(pu[0], pu[1], pu[2], pu[3], r))
+        return -1;
+    ns_fem_tet_forces(r, m, px, pv, f, fr);
+    return 0;
+}
+
+/* The corotational closed form (ns_fem_corot_row) gives ns_fem_tet_jacobians' blocks, and
+ * with an old rotation their change, on stretched, sheared and inverted tets. */
+static int corotational_rows_match(void)
+{
+    uint64_t st = 11;
+    double worst = 0.0;
+    int inverted = 0;
+    for (int n = 0; n < 60; n++) {
+        NsFemMaterial m = ns_fem_material(NS_MODEL_COROTATIONAL, 60e3, 0.45, 3.0, 10.0);
+        /* A rest tet, a state (the strong ones invert some tets) and an earlier state. */
+        double u[12], x[12], u2[12], x2[12];
+        make_tet(&st, u, x, n < 40 ? 0.15 : 1.2);
+        make_tet(&st, u2, x2, 0.15);
+        NsTetRest r;
+        NsTetFrame fr, fo;
+        ENSURE(frame_at(u, x, &m, &r, &fr) == 0 && frame_at(u, x2, &m, &r, &fo) == 0);
+        inverted += fr.s[2] < 0.0;
+        double K[144], D[144], Ko[144], Do[144], R[9], Ro[9];
+        ns_fem_tet_jacobians(&r, &m, &fr, 0, K, D);
+        ns_fem_tet_jacobians(&r, &m, &fo, 0, Ko, Do);
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++) {
+                R[3 * i + j] = Ro[3 * i + j] = 0.0;
+                for (int k = 0; k < 3; k++) {
+                    R[3 * i + j] += fr.U[3 * i + k] * fr.V[3 * j + k];
+                    Ro[3 * i + j] += fo.U[3 * i + k] * fo.V[3 * j + k];
+                }
+            }
+        double scale = 0.0, dscale = 0.0;
+        for (int k = 0; k < 144; k++) {
+            scale = fmax(scale, fabs(K[k]));
+            dscale = fmax(dscale, fabs(D[k]));
+        }
+        for (int a = 0; a < 4; a++) {
+            double kb[4][9] = {{0}}, db[4][9] = {{0}}, kc[4][9] = {{0}}, dc[4][9] = {{0}};
+            double *kp[4] = {kb[0], kb[1], kb[2], kb[3]}, *dp[4] = {db[0], db[1], db[2], db[3]};
+            double *kq[4] = {kc[0], kc[1], kc[2], kc[3]}, *dq[4] = {dc[0], dc[1], dc[2], dc[3]};
+            ns_fem_corot_row(&r, &m, R, NULL, a, kp, dp);
+            ns_fem_corot_row(&r, &m, R, Ro, a, kq, dq);
+            for (int b = 0; b < 4; b++)
+                for (int i = 0; i < 3; i++)
+                    for (int j = 0; j < 3; j++) {
+                        int e = 12 * (3 * a + i) + 3 * b + j;
+                        double ek = fabs(kb[b][3 * i + j] - K[e]) / scale;
+                        double ed = fabs(db[b][3 * i + j] - D[e]) / dscale;
+                        double ck = fabs(kc[b][3 * i + j] - (K[e] - Ko[e])) / scale;
+                        double cd = fabs(dc[b][3 * i + j] - (D[e] - Do[e])) / dscale;
+                        worst = fmax(worst, fmax(fmax(ek, ed), fmax(ck, cd)));
+                    }
+        }
+    }
+    printf("  worst difference %.2e of the largest entry, %d inverted tets\n", worst, inverted);
+    ENSURE(worst < 1e-12 && inverted > 0);
+    return 0;
+}
+
 NS_TEST_MAIN({"forces_are_energy_gradient", forces_are_energy_gradient},
              {"jacobians_match_finite_differences", jacobians_match_finite_differences},
              {"rigid_motion_is_force_free", rigid_motion_is_force_free},
              {"forces_balance", forces_balance},
              {"inverted_element_restores", inverted_element_restores},
              {"projected_stiffness_is_definite", projected_stiffness_is_definite},
-             {"batch_forces_match_single", batch_forces_match_single})
+             {"batch_forces_match_single", batch_forces_match_single},
+             {"corotational_rows_match", corotational_rows_match})
