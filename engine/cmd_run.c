@@ -930,6 +930,42 @@ static void json_vec(NsJson *j, const char *key, const double *v)
     ns_json_end_array(j);
 }
 
+static double series_mean(const Series *s)
+{
+    double lo, mean, hi;
+    series_range(s, &lo, &mean, &hi);
+    return mean;
+}
+
+/* The step's wall time (median, mean, p95, max) and each stage's median and mean per step
+ * (the paper's Table 2 columns): the means show what the medians hide, the steps that rebuild
+ * many Jacobians or refactor. */
+static void timing_json(NsJson *j, const Run *r)
+{
+    ns_json_key(j, "step_ms");
+    ns_json_begin_object(j);
+    ns_json_key(j, "median");
+    ns_json_number(j, series_quantile(&r->step_ms, 0.5));
+    ns_json_key(j, "mean");
+    ns_json_number(j, series_mean(&r->step_ms));
+    ns_json_key(j, "p95");
+    ns_json_number(j, series_quantile(&r->step_ms, 0.95));
+    ns_json_key(j, "max");
+    ns_json_number(j, series_quantile(&r->step_ms, 1.0));
+    ns_json_end_object(j);
+    const Series *st[5] = {&r->total_ms, &r->lcp_ms, &r->tissue_ms, &r->needle_ms, &r->remesh_ms};
+    static const char *const stn[5] = {"total", "lcp", "tissue", "needle", "remesh"};
+    for (int m = 0; m < 2; m++) {
+        ns_json_key(j, m ? "stages_mean_ms" : "stages_ms");
+        ns_json_begin_object(j);
+        for (int k = 0; k < 5; k++) {
+            ns_json_key(j, stn[k]);
+            ns_json_number(j, m ? series_mean(st[k]) : series_quantile(st[k], 0.5));
+        }
+        ns_json_end_object(j);
+    }
+}
+
 static int write_report(Run *r, const Results *res, uint64_t hash, char *err, int err_sz)
 {
     FILE *f = fopen(r->report_tmp, "w");
@@ -995,24 +1031,7 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_number(&j, (double)r->steps * r->spec.dt);
     ns_json_key(&j, "wall_time_s");
     ns_json_number(&j, r->wall_s);
-    ns_json_key(&j, "step_ms");
-    ns_json_begin_object(&j);
-    ns_json_key(&j, "median");
-    ns_json_number(&j, series_quantile(&r->step_ms, 0.5));
-    ns_json_key(&j, "p95");
-    ns_json_number(&j, series_quantile(&r->step_ms, 0.95));
-    ns_json_key(&j, "max");
-    ns_json_number(&j, series_quantile(&r->step_ms, 1.0));
-    ns_json_end_object(&j);
-    ns_json_key(&j, "stages_ms");
-    ns_json_begin_object(&j);
-    const Series *st[5] = {&r->total_ms, &r->lcp_ms, &r->tissue_ms, &r->needle_ms, &r->remesh_ms};
-    static const char *const stn[5] = {"total", "lcp", "tissue", "needle", "remesh"};
-    for (int k = 0; k < 5; k++) {
-        ns_json_key(&j, stn[k]);
-        ns_json_number(&j, series_quantile(st[k], 0.5));
-    }
-    ns_json_end_object(&j);
+    timing_json(&j, r);
     stats_object(&j, "lcp_trials", &r->trials);
     stats_object(&j, "cg_iterations", &r->iterations);
     ns_json_key(&j, "friction_consistent_fraction");
@@ -2091,24 +2110,7 @@ static void median_range(double *v, int n, double *med, double *lo, double *hi)
 
 static void bench_stats_json(NsJson *j, const Run *r)
 {
-    ns_json_key(j, "step_ms");
-    ns_json_begin_object(j);
-    ns_json_key(j, "median");
-    ns_json_number(j, series_quantile(&r->step_ms, 0.5));
-    ns_json_key(j, "p95");
-    ns_json_number(j, series_quantile(&r->step_ms, 0.95));
-    ns_json_key(j, "max");
-    ns_json_number(j, series_quantile(&r->step_ms, 1.0));
-    ns_json_end_object(j);
-    ns_json_key(j, "stages_ms");
-    ns_json_begin_object(j);
-    const Series *st[5] = {&r->total_ms, &r->lcp_ms, &r->tissue_ms, &r->needle_ms, &r->remesh_ms};
-    static const char *const stn[5] = {"total", "lcp", "tissue", "needle", "remesh"};
-    for (int k = 0; k < 5; k++) {
-        ns_json_key(j, stn[k]);
-        ns_json_number(j, series_quantile(st[k], 0.5));
-    }
-    ns_json_end_object(j);
+    timing_json(j, r);
     stats_object(j, "lcp_trials", &r->trials);
     stats_object(j, "cg_iterations", &r->iterations);
 }
@@ -2155,9 +2157,12 @@ static void bench_table(const Run *r)
     printf("  %8.2f %8.2f %8.2f %8.2f %8.2f\n", series_quantile(&r->total_ms, 0.5),
            series_quantile(&r->lcp_ms, 0.5), series_quantile(&r->tissue_ms, 0.5),
            series_quantile(&r->needle_ms, 0.5), series_quantile(&r->remesh_ms, 0.5));
-    printf("step wall time: median %.2f ms, p95 %.2f ms, max %.2f ms\n",
-           series_quantile(&r->step_ms, 0.5), series_quantile(&r->step_ms, 0.95),
-           series_quantile(&r->step_ms, 1.0));
+    printf("  %8.2f %8.2f %8.2f %8.2f %8.2f  (means)\n", series_mean(&r->total_ms),
+           series_mean(&r->lcp_ms), series_mean(&r->tissue_ms), series_mean(&r->needle_ms),
+           series_mean(&r->remesh_ms));
+    printf("step wall time: median %.2f ms, mean %.2f ms, p95 %.2f ms, max %.2f ms\n",
+           series_quantile(&r->step_ms, 0.5), series_mean(&r->step_ms),
+           series_quantile(&r->step_ms, 0.95), series_quantile(&r->step_ms, 1.0));
     printf("per step (the paper's Table 3): LCP trials %.0f / %.2f / %.0f, CG iterations "
            "%.0f / %.1f / %.0f (min / mean / max)\n",
            lo, mean, hi, ilo, imean, ihi);

@@ -72,7 +72,8 @@ typedef struct NsTissue {
     NsTetFrame *jframe; /* (tet_slots) frame the tet's Jacobian contribution was built from */
     double *jprod;      /* (tet_slots x 9) R = U V^T of jframe (F = U S V^T for neo-Hookean): the
                            lazy update's reference, kept rather than formed again every step */
-    uint8_t *jvalid;    /* (tet_slots) 1 if tet_jac holds its Jacobians at jframe */
+    uint8_t *jvalid;    /* (tet_slots) 1 if its rows hold its Jacobians at jframe (kept in
+                           tet_jac, or for a corotational tet given by jprod) */
     uint8_t *jnew;      /* (tet_slots) 1 if its Jacobians were rebuilt by the last call */
     /* The last call's changes of the rebuilt tets' Jacobians (new minus old, laid out as
      * tet_jac), which phase 2 adds to their rows instead of gathering them again: djac_slot[e]
@@ -87,7 +88,8 @@ typedef struct NsTissue {
     int djac_cap, djac_count;
     int kd_age;        /* calls since every row of K and D was last gathered */
     double *tet_force; /* (tet_slots x 12) element forces of the last evaluation [N] */
-    /* (tet_slots x 288) the tet's element Jacobians at jframe, dF/dx [N/m] and dF/dv [N s/m],
+    /* (tet_slots x 288) a non-corotational tet's element Jacobians at jframe (a corotational
+     * tet's are never stored: ns_fem_corot_row), dF/dx [N/m] and dF/dv [N s/m],
      * each 12 x 12 row-major, stored by node: for local node a, rows 3a..3a+2 of dF/dx (36
      * entries) then the same rows of dF/dv, at 72 a (JAC_STRIP a). A block row of K and D
      * reads one contiguous strip per tet. */

@@ -130,8 +130,9 @@ need = {
     "": ["schema", "scenario", "version", "steps", "sim_time_s", "wall_time_s", "step_ms",
          "stages_ms", "lcp_trials", "cg_iterations", "friction_consistent_fraction", "mesh",
          "needle", "targets", "seeds", "obstacles", "score", "warnings", "state_hash"],
-    "step_ms": ["median", "p95", "max"],
+    "step_ms": ["median", "mean", "p95", "max"],
     "stages_ms": ["total", "lcp", "tissue", "needle", "remesh"],
+    "stages_mean_ms": ["total", "lcp", "tissue", "needle", "remesh"],
     "lcp_trials": ["min", "mean", "max"], "cg_iterations": ["min", "mean", "max"],
     "mesh": ["tets", "nodes", "min_dihedral_deg", "max_dihedral_deg"],
     "needle": ["tip_m", "depth_m", "max_axial_force_n"],
@@ -386,10 +387,13 @@ import json, math, sys
 r = json.load(open(sys.argv[1]))
 exec(open(sys.argv[2]).read())
 finite(r, "bench")
-for k in ["step_ms", "stages_ms", "lcp_trials", "cg_iterations"]:
+for k in ["step_ms", "stages_ms", "stages_mean_ms", "lcp_trials", "cg_iterations"]:
     assert k in r, "missing " + k
 for k in ["total", "lcp", "tissue", "needle", "remesh"]:
     assert k in r["stages_ms"], "missing stages_ms." + k
+    assert k in r["stages_mean_ms"], "missing stages_mean_ms." + k
+s = r["step_ms"]
+assert s["median"] <= s["max"] and s["p95"] <= s["max"] and 0 < s["mean"] <= s["max"], s
 assert r["steps"] == 5, r["steps"]
 PY
     pass "bench --json: the contract's keys, 5 steps, nothing written"
