@@ -1241,6 +1241,8 @@ int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const dou
             for (int d = 0; d < 9; d++)
                 nb[d] += gamma * dt * B[d];
             add_tissue_point_block(&T->A, S.ta[k], S.tb[k], S.tw[k], B, gamma * dt);
+            ns_tissue_a_row_touched(T, S.ta[k]);
+            ns_tissue_a_row_touched(T, S.tb[k]);
         }
         k++;
     }

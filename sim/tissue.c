@@ -6,6 +6,7 @@
 #include "ns_config.h"
 #include "svd3.h"
 
+#include <limits.h>
 #include <math.h>
 #include <metis.h>
 #include <stdio.h>
@@ -69,6 +70,7 @@ void ns_tissue_free(NsTissue *t)
     free(t->force);
     free(t->dof_fixed);
     free(t->was_alive);
+    free(t->a_valid);
     free(t->rest_region);
     free(t->work);
     ns_bsm_free(&t->K);
@@ -156,8 +158,9 @@ int ns_tissue_init(NsTissue *t, const NsMesh *mesh, const NsTissueMaterial *mate
     t->tet_cap = nt > 0 ? nt : 1;
     t->node_cap = nn > 0 ? nn : 1;
     t->was_alive = calloc((size_t)t->node_cap, 1);
+    t->a_valid = calloc((size_t)t->node_cap, 1);
     t->rest_region = calloc((size_t)t->tet_cap, sizeof *t->rest_region);
-    if (!t->was_alive || !t->rest_region) {
+    if (!t->was_alive || !t->a_valid || !t->rest_region) {
         ns_set_err(err, err_sz, "out of memory");
         ns_tissue_free(t);
         return -1;
@@ -211,6 +214,7 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             grow_zero((void **)&t->force, old, cap, 3 * sizeof(double)) ||
             grow_zero((void **)&t->dof_fixed, old, cap, 3) ||
             grow_zero((void **)&t->was_alive, old, cap, 1) ||
+            grow_zero((void **)&t->a_valid, old, cap, 1) ||
             grow_zero((void **)&t->work, old, cap, 12 * sizeof(double))) {
             ns_set_err(err, err_sz, "out of memory");
             return -1;
@@ -219,29 +223,38 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             t->dof_fixed[3 * i] = t->dof_fixed[3 * i + 1] = t->dof_fixed[3 * i + 2] = 1;
         t->node_cap = cap;
     }
+    int a_rows = t->A.n;
     if (ns_bsm_resize(&t->K, nn) || ns_bsm_resize(&t->D, nn) || ns_bsm_resize(&t->A, nn)) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
-    /* Rest data: recomputed for every tet, the Jacobians of changed ones marked stale. */
-    memset(t->mass, 0, (size_t)nn * sizeof(double));
+    for (int i = a_rows; i < nn; i++) /* rows new to A (or emptied and grown back) */
+        t->a_valid[i] = 0;
+    /* Rest data: recomputed for every tet, the Jacobians of changed ones marked stale; the
+     * masses summed again into work (a row of A whose mass changed is written again). */
+    double *mass_new = t->work;
+    memset(mass_new, 0, (size_t)nn * sizeof(double));
+    /* Each tet writes only its own entries, so the tets are split over the threads; a bad tet
+     * (no material, flat or inverted) is reported by its lowest index, as a serial loop would. */
+    int threads = t->params.threads > 1 ? t->params.threads : 1, bad = INT_MAX;
+    (void)threads;
+#if NS_HAVE_OPENMP
+#pragma omp parallel for num_threads(threads) schedule(static)                                     \
+    reduction(min                                                                                  \
+              : bad) if (threads > 1 && nt >= 4096)
+#endif
     for (int e = 0; e < nt; e++) {
         if (!ns_mesh_tet_alive(M, e)) {
             t->jvalid[e] = 0;
             continue;
         }
         const int *tn = M->tet_node + 4 * e;
-        if (M->tet_region[e] >= t->material_count) {
-            ns_set_err(err, err_sz, "tet %d has region %d, which has no material", e,
-                       M->tet_region[e]);
-            return -1;
-        }
         NsTetRest r;
-        if (ns_fem_rest(M->u + 3 * tn[0], M->u + 3 * tn[1], M->u + 3 * tn[2], M->u + 3 * tn[3],
+        if (M->tet_region[e] >= t->material_count ||
+            ns_fem_rest(M->u + 3 * tn[0], M->u + 3 * tn[1], M->u + 3 * tn[2], M->u + 3 * tn[3],
                         &r)) {
-            ns_set_err(err, err_sz, "tet %d is flat or inverted in material space (volume %g)", e,
-                       r.W);
-            return -1;
+            bad = e < bad ? e : bad;
+            continue;
         }
         /* A changed shape or material (a reused slot) invalidates the tet's Jacobians. */
         if (memcmp(&r, &t->rest[e], sizeof r) != 0 || t->rest_region[e] != M->tet_region[e]) {
@@ -249,9 +262,31 @@ int ns_tissue_sync_topology(NsTissue *t, char *err, int err_sz)
             t->rest_region[e] = M->tet_region[e];
             t->jvalid[e] = 0;
         }
-        double m4 = t->materials[M->tet_region[e]].density * r.W / 4.0;
+    }
+    if (bad < nt) {
+        const int *tn = M->tet_node + 4 * bad;
+        NsTetRest r;
+        if (M->tet_region[bad] >= t->material_count)
+            ns_set_err(err, err_sz, "tet %d has region %d, which has no material", bad,
+                       M->tet_region[bad]);
+        else if (ns_fem_rest(M->u + 3 * tn[0], M->u + 3 * tn[1], M->u + 3 * tn[2], M->u + 3 * tn[3],
+                             &r))
+            ns_set_err(err, err_sz, "tet %d is flat or inverted in material space (volume %g)", bad,
+                       r.W);
+        return -1;
+    }
+    for (int e = 0; e < nt; e++) { /* in tet order: the same sums on any thread count */
+        if (!ns_mesh_tet_alive(M, e))
+            continue;
+        const int *tn = M->tet_node + 4 * e;
+        double m4 = t->materials[M->tet_region[e]].density * t->rest[e].W / 4.0;
         for (int k = 0; k < 4; k++)
-            t->mass[tn[k]] += m4;
+            mass_new[tn[k]] += m4;
+    }
+    for (int i = 0; i < nn; i++) {
+        if (memcmp(&mass_new[i], &t->mass[i], sizeof(double)) != 0)
+            t->a_valid[i] = 0;
+        t->mass[i] = mass_new[i];
     }
     /* DOFs: new nodes free (unless flagged fixed), removed ones fixed, others as they were. */
     for (int i = 0; i < nn; i++) {
@@ -798,12 +833,13 @@ static int node_rows(NsTissue *t, int i, int all_rows, int *colpos, AssemblyCoun
                     (t->djac_slot[e] < 0 || t->djac_count > t->djac_cap);
         }
     }
+    if (!dirty && !changed)
+        return 0;
+    t->a_valid[i] = 0; /* K's or D's row changes: A's must be written again */
     if (!dirty && changed && row_add_changes(t, i, colpos) == 0) {
         c->rows_changed++;
         return 0;
     }
-    if (!dirty && !changed)
-        return 0;
     c->rows_gathered++;
     NsBlockRow *kr = &t->K.rows[i], *dr = &t->D.rows[i];
     if (kr->count)
@@ -1045,7 +1081,8 @@ void ns_tissue_forces(NsTissue *t, int force_all, NsTissueStats *stats)
  * A is inserted (only row i's arrays change, so rows can be built on any thread). With y given,
  * the same walk also takes row i of the products K y and D z into ky and dz (the right-hand
  * side's, Eq. 5), summed in column order exactly as ns_bsm_mul would: one pass over K and D
- * instead of three. */
+ * instead of three. A row marked a_valid (it is what this would write) is only read for the
+ * products: three rows in four on the brachytherapy bench. */
 static int build_row(NsTissue *t, int i, double c1, double c2, const double *y, const double *z,
                      double *ky, double *dz)
 {
@@ -1053,20 +1090,25 @@ static int build_row(NsTissue *t, int i, double c1, double c2, const double *y, 
     NsBlockRow *ar = &t->A.rows[i];
     int pd = 0, pa = 0, matched = 0;
     double sk[3] = {0.0, 0.0, 0.0}, sd[3] = {0.0, 0.0, 0.0};
+    int write = !t->a_valid[i]; /* else A's row stands: only the products */
+    if (!write && !y)
+        return 0;
     for (int p = 0; p < kr->count; p++) {
         int j = kr->col[p];
         const double *kb = kr->val + 9 * p;
         while (pd < dr->count && dr->col[pd] < j)
             pd++;
         const double *db = pd < dr->count && dr->col[pd] == j ? dr->val + 9 * pd : NULL;
-        while (pa < ar->count && ar->col[pa] < j)
-            pa++;
-        double *ab =
-            pa < ar->count && ar->col[pa] == j ? ar->val + 9 * pa : ns_bsm_get(&t->A, i, j);
-        if (!ab)
-            return -1; /* out of memory */
-        for (int q = 0; q < 9; q++)
-            ab[q] = -c1 * kb[q] - c2 * (db ? db[q] : 0.0);
+        if (write) {
+            while (pa < ar->count && ar->col[pa] < j)
+                pa++;
+            double *ab =
+                pa < ar->count && ar->col[pa] == j ? ar->val + 9 * pa : ns_bsm_get(&t->A, i, j);
+            if (!ab)
+                return -1; /* out of memory */
+            for (int q = 0; q < 9; q++)
+                ab[q] = -c1 * kb[q] - c2 * (db ? db[q] : 0.0);
+        }
         if (y) {
             NS_ROW_ACC(sk, kb, y + 3 * j);
             if (db) {
@@ -1086,11 +1128,14 @@ static int build_row(NsTissue *t, int i, double c1, double c2, const double *y, 
             dz[3 * i + c] = sd[c];
         }
     }
+    if (!write)
+        return 0;
     double *d = ns_bsm_get(&t->A, i, i);
     if (!d)
         return -1;
     for (int c = 0; c < 3; c++)
         d[4 * c] += t->mass[i] > 0.0 ? t->mass[i] : 1.0; /* unused slots: identity */
+    t->a_valid[i] = 1;
     return 0;
 }
 
@@ -1104,6 +1149,13 @@ static int build_system(NsTissue *t, double c1, double c2, const double *y, cons
 {
     int threads = t->params.threads > 1 ? t->params.threads : 1, failed = 0;
     int n = t->K.n, nn = t->mesh.node_slots;
+    /* Rows of A kept from the last build only if its coefficients were these (bitwise) and A
+     * still has K's rows (a row of A that ran out of memory is marked not valid). */
+    if (memcmp(&c1, &t->a_c1, sizeof c1) != 0 || memcmp(&c2, &t->a_c2, sizeof c2) != 0 ||
+        t->A.n != n)
+        memset(t->a_valid, 0, (size_t)n);
+    t->a_c1 = c1;
+    t->a_c2 = c2;
 #define NS_BUILD_ROW(i) build_row(t, i, c1, c2, (i) < nn ? y : NULL, z, ky, dz)
 #if NS_HAVE_OPENMP
     if (threads > 1 && n >= NS_BSM_PARALLEL_MIN_ROWS) {
@@ -1248,6 +1300,7 @@ int ns_tissue_static_solve(NsTissue *t, NsSolver *solver, const double *ext, dou
             double *d = ns_bsm_get(&t->A, i, i);
             for (int c = 0; c < 3; c++)
                 d[4 * c] -= t->mass[i] > 0.0 ? t->mass[i] : 1.0;
+            t->a_valid[i] = 0;
         }
         NsSolveStats ss;
         if (ns_solver_solve(solver, &t->A, t->dof_fixed, rhs, dx, 1e-12, 20000, &ss)) {
@@ -1262,6 +1315,12 @@ int ns_tissue_static_solve(NsTissue *t, NsSolver *solver, const double *ext, dou
     if (stats)
         *stats = st;
     return it;
+}
+
+void ns_tissue_a_row_touched(NsTissue *t, int i)
+{
+    if (i >= 0 && i < t->node_cap)
+        t->a_valid[i] = 0;
 }
 
 double ns_tissue_energy(const NsTissue *t)

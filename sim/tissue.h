@@ -102,9 +102,14 @@ typedef struct NsTissue {
     uint64_t steps;
     int tet_cap, node_cap; /* slots the per-tet and per-node arrays hold */
     uint8_t *was_alive;    /* (node_cap) node alive at the last init / sync */
-    int *rest_region;      /* (tet_cap) region the tet's rest data and Jacobians are for */
-    uint64_t kd_version;   /* topology version K and D were last gathered for */
-    int kd_valid;          /* 0: every block row of K and D must be gathered again */
+    /* (node_cap) 1 if block row i of A is what the system build would write now (its rows of K
+     * and D, its mass and the coefficients a_c1, a_c2 unchanged since it was written, and
+     * nobody else wrote to it): the build then only takes the row's products (build_row) */
+    uint8_t *a_valid;
+    double a_c1, a_c2;
+    int *rest_region;    /* (tet_cap) region the tet's rest data and Jacobians are for */
+    uint64_t kd_version; /* topology version K and D were last gathered for */
+    int kd_valid;        /* 0: every block row of K and D must be gathered again */
     /* Work partition (§3.6.3), a function of the topology and the thread count only: part p
      * owns nodes part_nodes[part_node_start[p] .. part_node_start[p+1]) and tets likewise. */
     int part_count;
@@ -166,6 +171,10 @@ int ns_tissue_step(NsTissue *t, NsSolver *solver, double dt, const double *ext,
  * the state is unchanged); end_step applies the Newmark update with the accelerations anew. */
 double *ns_tissue_begin_step(NsTissue *t, double dt, const double *ext, NsTissueStats *st);
 void ns_tissue_end_step(NsTissue *t, double dt, const double *anew);
+
+/* The caller changed block row i of t->A (coupling.c's viscous friction): the next system
+ * build writes it again. */
+void ns_tissue_a_row_touched(NsTissue *t, int i);
 
 /* Static equilibrium by Newton's method on the free DOFs (fixed DOFs keep their x): stops when
  * the free residual force is below tol times the largest applied or reaction force, or after
