@@ -51,12 +51,10 @@ double ns_tet_quality(const double *p0, const double *p1, const double *p2, cons
     return 6.0 * sqrt(2.0) * ns_tet_volume(p0, p1, p2, p3) / (rms * rms * rms);
 }
 
-double ns_tet_dihedrals(const double *p0, const double *p1, const double *p2, const double *p3,
-                        double out[6])
+/* Unit normals n_k of the faces opposite vertex k, oriented away from k; 0 for a degenerate
+ * tet (a face of no area). */
+static int face_normals(const double *const p[4], double n[4][3])
 {
-    const double *p[4] = {p0, p1, p2, p3};
-    /* Outward-ish face normals n_k of the face opposite vertex k (oriented away from k). */
-    double n[4][3];
     for (int k = 0; k < 4; k++) {
         int a = (k + 1) % 4, b = (k + 2) % 4, c = (k + 3) % 4;
         double e1[3], e2[3], d[3];
@@ -70,38 +68,65 @@ double ns_tet_dihedrals(const double *p0, const double *p1, const double *p2, co
             n[k][2] = -n[k][2];
         }
         double len = sqrt(dot(n[k], n[k]));
-        if (len <= DBL_MIN) {
-            if (out)
-                for (int i = 0; i < 6; i++)
-                    out[i] = 0.0;
-            return 0.0;
-        }
+        if (len <= DBL_MIN)
+            return 0;
         for (int i = 0; i < 3; i++)
             n[k][i] /= len;
     }
-    /* The dihedral angle at edge (i, j) lies between the two faces that contain the edge, the
-     * faces opposite the other two vertices k, l: angle = pi - angle(n_k, n_l). */
-    static const int edge[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+    return 1;
+}
+
+/* The dihedral angle at edge (i, j) lies between the two faces that contain the edge, the
+ * faces opposite the other two vertices k, l: angle = pi - angle(n_k, n_l), whose cosine is
+ * -n_k . n_l (clamped to [-1, 1]). */
+static const int edge_faces[6][2] = {{2, 3}, {1, 3}, {1, 2}, {0, 3}, {0, 2}, {0, 1}};
+
+static double edge_cos(double n[4][3], int e)
+{
+    double c = -dot(n[edge_faces[e][0]], n[edge_faces[e][1]]);
+    return c > 1.0 ? 1.0 : (c < -1.0 ? -1.0 : c);
+}
+
+double ns_tet_dihedrals(const double *p0, const double *p1, const double *p2, const double *p3,
+                        double out[6])
+{
+    const double *p[4] = {p0, p1, p2, p3};
+    double n[4][3];
+    if (!face_normals(p, n)) {
+        if (out)
+            for (int i = 0; i < 6; i++)
+                out[i] = 0.0;
+        return 0.0;
+    }
     double mn = 180.0;
     for (int e = 0; e < 6; e++) {
-        int k = -1, l = -1;
-        for (int v = 0; v < 4; v++) {
-            if (v == edge[e][0] || v == edge[e][1])
-                continue;
-            if (k < 0)
-                k = v;
-            else
-                l = v;
-        }
-        double c = -dot(n[k], n[l]);
-        c = c > 1.0 ? 1.0 : (c < -1.0 ? -1.0 : c);
-        double ang = acos(c) * (180.0 / M_PI);
+        double ang = acos(edge_cos(n, e)) * (180.0 / M_PI);
         if (out)
             out[e] = ang;
         if (ang < mn)
             mn = ang;
     }
     return mn;
+}
+
+double ns_tet_min_dihedral(const double *p0, const double *p1, const double *p2, const double *p3)
+{
+    const double *p[4] = {p0, p1, p2, p3};
+    double n[4][3];
+    if (!face_normals(p, n))
+        return 0.0;
+    /* acos falls as its argument rises: the smallest angle is the largest cosine's (NaNs, as
+     * in ns_tet_dihedrals, never count). */
+    double cmax = -INFINITY;
+    for (int e = 0; e < 6; e++) {
+        double c = edge_cos(n, e);
+        if (c > cmax)
+            cmax = c;
+    }
+    if (cmax == -INFINITY)
+        return 180.0;
+    double ang = acos(cmax) * (180.0 / M_PI);
+    return ang < 180.0 ? ang : 180.0;
 }
 
 void ns_mesh_quality(const NsMesh *m, bool use_world, NsQualityStats *out)

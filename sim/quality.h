@@ -17,6 +17,10 @@ double ns_tet_quality(const double *p0, const double *p1, const double *p2, cons
 double ns_tet_dihedrals(const double *p0, const double *p1, const double *p2, const double *p3,
                         double out[6]);
 
+/* ns_tet_dihedrals' minimum from one acos (of the largest cosine) instead of six: the same
+ * value, acos being monotone (tests/test_quality.c compares them). */
+double ns_tet_min_dihedral(const double *p0, const double *p1, const double *p2, const double *p3);
+
 typedef struct NsQualityStats {
     int tets;
     double min_dihedral_deg;

@@ -1,4 +1,5 @@
-/* Tests for sim/quality.c: the quality measure and dihedral angles on tets with known answers. */
+/* Tests for sim/quality.c: the quality measure and dihedral angles on tets with known answers;
+ * the one-acos minimum against the six angles. */
 #include "quality.h"
 #include "ns_test.h"
 
@@ -71,5 +72,43 @@ static int mesh_stats(void)
     return 0;
 }
 
+/* ns_tet_min_dihedral (one acos) gives ns_tet_dihedrals' minimum bit for bit: on random tets,
+ * slivers (a vertex near the opposite face), needles, inverted, flat and coincident ones. */
+static int min_dihedral_matches(void)
+{
+    unsigned seed = 7u;
+    int checked = 0;
+    for (int k = 0; k < 20000; k++) {
+        double p[4][3];
+        for (int v = 0; v < 4; v++)
+            for (int c = 0; c < 3; c++) {
+                seed = seed * 1664525u + 1013904223u;
+                p[v][c] = (double)(seed >> 8) / 16777216.0 - 0.5;
+            }
+        int kind = k % 5;
+        if (kind == 1) /* a sliver: the last vertex pulled almost into the plane of the others */
+            for (int c = 0; c < 3; c++)
+                p[3][c] = (p[0][c] + p[1][c] + p[2][c]) / 3.0 + 1e-7 * p[3][c];
+        if (kind == 2) /* a needle: two vertices almost together */
+            for (int c = 0; c < 3; c++)
+                p[1][c] = p[0][c] + 1e-9 * p[1][c];
+        if (kind == 3) /* flat */
+            p[3][2] = p[0][2] = p[1][2] = p[2][2];
+        if (kind == 4) /* coincident */
+            for (int c = 0; c < 3; c++)
+                p[2][c] = p[1][c];
+        double want = ns_tet_dihedrals(p[0], p[1], p[2], p[3], NULL);
+        double got = ns_tet_min_dihedral(p[0], p[1], p[2], p[3]);
+        ENSURE(ns_same_bits(&got, &want, 1));
+        /* the vertices in another order: the same tet */
+        double want2 = ns_tet_dihedrals(p[2], p[0], p[3], p[1], NULL);
+        double got2 = ns_tet_min_dihedral(p[2], p[0], p[3], p[1]);
+        ENSURE(ns_same_bits(&got2, &want2, 1));
+        checked++;
+    }
+    ENSURE(checked == 20000);
+    return 0;
+}
+
 NS_TEST_MAIN({"regular_tet", regular_tet}, {"corner_tet", corner_tet}, {"flat_tet", flat_tet},
-             {"mesh_stats", mesh_stats})
+             {"mesh_stats", mesh_stats}, {"min_dihedral_matches", min_dihedral_matches})
