@@ -417,26 +417,6 @@ static void run_bin(NsSuperFactor *f, int b, int dir)
         backward(f, f->list[b], f->count[b], f->y, f->tbuf[b]);
 }
 
-static void run_bins(NsSuperFactor *f, int dir, int threads)
-{
-#if NS_HAVE_OPENMP
-    if (threads > 1 && f->count[0] > 0 && f->count[1] > 0) {
-#pragma omp parallel num_threads(2)
-        {
-            int me = omp_get_thread_num();
-            run_bin(f, me, dir);
-            if (omp_get_num_threads() == 1) /* OpenMP gave one thread: it does both */
-                run_bin(f, 1, dir);
-        }
-        return;
-    }
-#else
-    (void)threads;
-#endif
-    run_bin(f, 0, dir);
-    run_bin(f, 1, dir);
-}
-
 /* ---- The top part: few supernodes, the largest dense blocks (the root separator). Each is
  * done in column blocks of TOP_CB: the small triangle of a block on one thread, then the work
  * of the rest of the supernode against the block split in two fixed halves, run at once with
@@ -559,47 +539,120 @@ static void top_super(NsSuperFactor *f, int s, int dir, int threads)
             y[b.below[i]] -= t[i];
 }
 
-void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double *x, int threads)
+/* b's entries into y for the columns of owner o's supernodes, scaled by sc (b given), or
+ * those of y into x, scaled by sc (b NULL): the right-hand side in, the answer out. */
+static void move_cols(NsSuperFactor *f, int o, const int *at, const double *b, double *x, double sc)
 {
-    int n = f->n;
     sreal *y = f->y;
-    /* b scaled by a power of two (exact) to a largest entry in [0.5, 1), so that the float
-     * substitutions neither overflow nor lose small right-hand sides (a converging residual)
-     * to underflow; the answer is scaled back. */
+    for (int q = 0; q < f->count[o]; q++) {
+        int s = f->list[o][q];
+        for (int k = f->super[s]; k < f->super[s + 1]; k++) {
+            int j = f->perm[k];
+            if (b)
+                y[k] = (sreal)(b[at ? at[j] : j] * sc);
+            else
+                x[at ? at[j] : j] = (double)y[k] * sc;
+        }
+    }
+}
+
+/* The largest |b| over k in [k0, k1) (NaNs ignored). */
+static double abs_max(const int *at, const double *b, int k0, int k1)
+{
     double big = 0.0;
-    for (int k = 0; k < n; k++) {
+    for (int k = k0; k < k1; k++) {
         double v = fabs(b[at ? at[k] : k]);
         big = v > big ? v : big;
     }
+    return big;
+}
+
+/* b scaled by a power of two (exact) to a largest entry in [0.5, 1), so that the float
+ * substitutions neither overflow nor lose small right-hand sides (a converging residual) to
+ * underflow; the answer is scaled back: the factors for big = the largest |b|. */
+static void scales(double big, double *down, double *up)
+{
     int e = 0;
     if (big > 0.0 && isfinite(big))
         frexp(big, &e);
     e = e < -1020 ? -1020 : e > 1020 ? 1020 : e; /* both factors finite */
-    double down = ldexp(1.0, -e), up = ldexp(1.0, e);
-    for (int k = 0; k < n; k++) {
-        int j = f->perm[k];
-        y[k] = (sreal)(b[at ? at[j] : j] * down);
-    }
-    for (int i = 0; i < f->ntop_cols; i++) {
-        f->acc[0][f->top_cols[i]] = 0.0;
-        f->acc[1][f->top_cols[i]] = 0.0;
-    }
-    /* L y = P b: the bins, their sums into the top rows in a fixed order, then the top. */
-    run_bins(f, 0, threads);
+    *down = ldexp(1.0, -e);
+    *up = ldexp(1.0, e);
+}
+
+/* L y = P b's forward and L^T z = y's backward substitutions on the top part, between the
+ * bins' (the bins' sums into the top rows taken in a fixed order first). */
+static void solve_top(NsSuperFactor *f, int threads)
+{
+    sreal *y = f->y;
     for (int i = 0; i < f->ntop_cols; i++) {
         int r = f->top_cols[i];
         y[r] = (y[r] - f->acc[0][r]) - f->acc[1][r];
     }
     for (int q = 0; q < f->count[TOP]; q++)
         top_super(f, f->list[TOP][q], 0, threads);
-    /* L^T z = y: the top, then the bins. */
     for (int q = f->count[TOP] - 1; q >= 0; q--)
         top_super(f, f->list[TOP][q], 1, threads);
-    run_bins(f, 1, threads);
-    for (int k = 0; k < n; k++) {
-        int j = f->perm[k];
-        x[at ? at[j] : j] = (double)y[k] * up;
+}
+
+void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double *x, int threads)
+{
+    int n = f->n;
+#if NS_HAVE_OPENMP
+    if (threads > 1 && f->count[0] > 0 && f->count[1] > 0) {
+        /* Each thread scales, gathers and later scatters its own bin's columns (thread 0 also
+         * the top part's) next to its substitutions: the same numbers as the serial path
+         * below, with no serial pass over the vectors. */
+        double part[2] = {0.0, 0.0}, up = 1.0;
+#pragma omp parallel num_threads(2)
+        {
+            int me = omp_get_thread_num(), nth = omp_get_num_threads();
+            part[me] = abs_max(at, b, nth == 1 ? 0 : me * (n / 2), me == 0 && nth > 1 ? n / 2 : n);
+#pragma omp barrier
+            double down, u;
+            scales(part[1] > part[0] ? part[1] : part[0], &down, &u);
+            for (int o = 0; o < 2; o++)
+                if (o == me || nth == 1) {
+                    move_cols(f, o, at, b, NULL, down);
+                    for (int i = 0; i < f->ntop_cols; i++)
+                        f->acc[o][f->top_cols[i]] = 0.0;
+                    if (o == 0) {
+                        move_cols(f, TOP, at, b, NULL, down);
+                        up = u;
+                    }
+                    run_bin(f, o, 0);
+                }
+        }
+        solve_top(f, threads);
+#pragma omp parallel num_threads(2)
+        {
+            int me = omp_get_thread_num(), nth = omp_get_num_threads();
+            for (int o = 0; o < 2; o++)
+                if (o == me || nth == 1) {
+                    run_bin(f, o, 1);
+                    move_cols(f, o, at, NULL, x, up);
+                    if (o == 0)
+                        move_cols(f, TOP, at, NULL, x, up);
+                }
+        }
+        return;
     }
+#endif
+    double down, up;
+    scales(abs_max(at, b, 0, n), &down, &up);
+    for (int o = 0; o < 3; o++)
+        move_cols(f, o, at, b, NULL, down);
+    for (int i = 0; i < f->ntop_cols; i++) {
+        f->acc[0][f->top_cols[i]] = 0.0;
+        f->acc[1][f->top_cols[i]] = 0.0;
+    }
+    run_bin(f, 0, 0);
+    run_bin(f, 1, 0);
+    solve_top(f, threads);
+    run_bin(f, 0, 1);
+    run_bin(f, 1, 1);
+    for (int o = 0; o < 3; o++)
+        move_cols(f, o, at, NULL, x, up);
 }
 
 void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
