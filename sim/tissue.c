@@ -558,10 +558,19 @@ static int partition(NsTissue *t, int parts)
     memset(ts, 0, (size_t)(parts + 1) * sizeof(int));
     for (int i = 0; i < nn; i++)
         ns[part[i] + 1]++;
+    /* each tet's part (-1: dead), once (tet_part is most of this), in part's storage: its
+     * first nn entries are read above and below, so the tets' go after them */
+    int *tp = realloc(part, ((size_t)nn + (size_t)nt + 1) * sizeof(int));
+    if (!tp) {
+        free(part);
+        return -1;
+    }
+    part = tp;
+    tp = part + nn;
     for (int e = 0; e < nt; e++) {
-        if (!ns_mesh_tet_alive(M, e))
-            continue;
-        ts[tet_part(part, M->tet_node + 4 * e) + 1]++;
+        tp[e] = ns_mesh_tet_alive(M, e) ? tet_part(part, M->tet_node + 4 * e) : -1;
+        if (tp[e] >= 0)
+            ts[tp[e] + 1]++;
     }
     for (int p = 0; p < parts; p++) {
         ns[p + 1] += ns[p];
@@ -570,8 +579,8 @@ static int partition(NsTissue *t, int parts)
     for (int i = 0; i < nn; i++)
         pn[ns[part[i]]++] = i;
     for (int e = 0; e < nt; e++)
-        if (ns_mesh_tet_alive(M, e))
-            pt[ts[tet_part(part, M->tet_node + 4 * e)]++] = e;
+        if (tp[e] >= 0)
+            pt[ts[tp[e]]++] = e;
     for (int p = parts; p > 0; p--) {
         ns[p] = ns[p - 1];
         ts[p] = ts[p - 1];
