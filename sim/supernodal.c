@@ -34,6 +34,7 @@ struct NsSuperFactor {
     unsigned char *col_owner; /* (n) owner of the supernode of each column */
     int *top_cols;            /* columns of the top part, ascending */
     int ntop_cols;
+    int light; /* the bin with fewer entries: its thread also moves the top part's vector */
     /* Workspace: y (n), one accumulator (n) and one gather buffer (max_below) per bin. */
     sreal *y, *acc[2], *tbuf[2];
 };
@@ -281,6 +282,9 @@ NsSuperFactor *ns_super_from_cholmod(const cholmod_factor *L)
         ns_super_free(f);
         return NULL;
     }
+    size_t e[3];
+    ns_super_cut(f, e);
+    f->light = e[1] < e[0];
     return f;
 }
 
@@ -600,9 +604,9 @@ void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double 
     int n = f->n;
 #if NS_HAVE_OPENMP
     if (threads > 1 && f->count[0] > 0 && f->count[1] > 0) {
-        /* Each thread scales, gathers and later scatters its own bin's columns (thread 0 also
-         * the top part's) next to its substitutions: the same numbers as the serial path
-         * below, with no serial pass over the vectors. */
+        /* Each thread scales, gathers and later scatters its own bin's columns (the lighter
+         * bin's thread also the top part's) next to its substitutions: the same numbers as the
+         * serial path below, with no serial pass over the vectors. */
         double part[2] = {0.0, 0.0}, up = 1.0;
 #pragma omp parallel num_threads(2)
         {
@@ -616,7 +620,7 @@ void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double 
                     move_cols(f, o, at, b, NULL, down);
                     for (int i = 0; i < f->ntop_cols; i++)
                         f->acc[o][f->top_cols[i]] = 0.0;
-                    if (o == 0) {
+                    if (o == f->light) {
                         move_cols(f, TOP, at, b, NULL, down);
                         up = u;
                     }
@@ -631,7 +635,7 @@ void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double 
                 if (o == me || nth == 1) {
                     run_bin(f, o, 1);
                     move_cols(f, o, at, NULL, x, up);
-                    if (o == 0)
+                    if (o == f->light)
                         move_cols(f, TOP, at, NULL, x, up);
                 }
         }
