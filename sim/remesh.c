@@ -587,6 +587,8 @@ static int region_quality(const NsMesh *m, const int *nodes, int nn, double *q, 
      * incident tet was most of the scoring). The list keeps the order of first sight. */
     enum { SET = 4 * REGION_CAP };
     int set[SET];
+    if (cap > REGION_CAP) /* the set stays at most a quarter full */
+        cap = REGION_CAP;
     for (int k = 0; k < SET; k++)
         set[k] = -1;
     int n = 0;
