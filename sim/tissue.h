@@ -98,7 +98,9 @@ typedef struct NsTissue {
     double *force;      /* (3 node_slots) total force at the current state [N] */
     uint8_t *dof_fixed; /* (3 node_slots) */
     NsBlockMatrix K, D, A;
-    double *work; /* scratch, 4 x 3 node_slots */
+    /* scratch, 4 x 3 node_slots: begin_step's right-hand side and the caller's solve until
+     * end_step; ns_tissue_sync_topology sums the masses in it (nothing in it survives a sync) */
+    double *work;
     uint64_t steps;
     int tet_cap, node_cap; /* slots the per-tet and per-node arrays hold */
     uint8_t *was_alive;    /* (node_cap) node alive at the last init / sync */
