@@ -65,6 +65,9 @@ typedef struct RefreshJob {
     double *Z;
     int *dof;
     int dof_cap;
+    /* out: the tail's blocks of L (tail_extract), when the analysis has a tail */
+    double *tail_S, *tail_L0;
+    int tail_k, tail_ok;
 } RefreshJob;
 
 struct NsSolver {
@@ -101,6 +104,19 @@ struct NsSolver {
     int nsrc, nheld, src_cap, held_cap;
     double *work; /* 5 vectors of 3n for CG, then the chunk partial sums */
     int work_cap;
+    /* The tail (docs/solvers.md, "The tail"): nodes the caller asked to be ordered last at the
+     * next analysis (tail_req), and the free DOFs that Lsym's ordering put last (tail_k, 0 if
+     * none). For the factor in use: tail_L0 its trailing block L22 and tail_S = A22 - L22 L22^T
+     * (k x k, column-major), the part of the trailing Schur complement that comes from the
+     * rest of the matrix. ns_solver_tail_update refactors A22_now - tail_S into the copy. */
+    int *tail_req, tail_nreq, tail_req_cap;
+    int tail_k, tail_ok;
+    double *tail_S, *tail_L0, *tail_D;
+    const double *tail_cur; /* the block in the copy now: tail_D or tail_L0 */
+    size_t tail_cap;
+    int *iperm; /* (nfree) the copy's numbering of each free DOF */
+    int iperm_cap;
+    const NsSuperFactor *iperm_of;
 };
 
 #if NS_HAVE_OPENBLAS
@@ -225,11 +241,15 @@ static void drop_super(NsSolver *s)
     ns_super_free(s->sf);
     s->sf = NULL;
     s->sf_tried = 0;
+    s->iperm_of = NULL;
 }
 
 static void free_factors(NsSolver *s)
 {
     drop_super(s);
+    s->tail_k = 0;
+    s->tail_ok = 0;
+    s->tail_cur = NULL;
     if (s->L)
         cholmod_free_factor(&s->L, &s->cm);
     if (s->spare)
@@ -258,7 +278,14 @@ void ns_solver_destroy(NsSolver *s)
     free(s->dof_held);
     free(s->dof);
     free(s->job.dof);
+    free(s->job.tail_S);
+    free(s->job.tail_L0);
     free(s->work);
+    free(s->tail_req);
+    free(s->tail_S);
+    free(s->tail_L0);
+    free(s->tail_D);
+    free(s->iperm);
     free(s);
 }
 
@@ -379,6 +406,152 @@ static cholmod_sparse *to_cholmod(const NsBlockMatrix *A, const int *dof, int nf
     return M;
 }
 
+/* ---- The tail (docs/solvers.md, "The tail") ---- */
+
+/* The analysis of M: METIS's ordering, with the free DOFs of the requested tail nodes moved
+ * to its end when there are any (then *tail_k is their count). */
+static cholmod_factor *analyze(NsSolver *s, cholmod_sparse *M, int *tail_k)
+{
+    *tail_k = 0;
+    int n = (int)M->nrow, k = 0;
+    int *perm = NULL;
+    unsigned char *mark = NULL;
+    cholmod_factor *L = NULL;
+    if (s->tail_nreq > 0 && n > 0) {
+        perm = malloc(2 * (size_t)n * sizeof *perm);
+        mark = calloc((size_t)n, 1);
+    }
+    if (perm && mark) {
+        int *tail = perm + n;
+        for (int i = 0; i < s->tail_nreq; i++)
+            for (int c = 0; c < 3; c++) {
+                int d = 3 * s->tail_req[i] + c;
+                int f = d < s->n3 ? s->dof[d] : -1;
+                if (f >= 0 && !mark[f]) {
+                    mark[f] = 1;
+                    tail[k++] = f;
+                }
+            }
+        if (k > 0 && 2 * k < n && cholmod_metis(M, NULL, 0, 1, perm, &s->cm)) {
+            int m = 0;
+            for (int i = 0; i < n; i++)
+                if (!mark[perm[i]])
+                    perm[m++] = perm[i];
+            memmove(perm + m, tail, (size_t)k * sizeof *perm); /* m = n - k */
+            /* The elimination tree's postorder, which the supernodal analysis needs, with each
+             * node's tail child visited last (the heaviest child goes last), so the tail stays
+             * at the end: CHOLMOD's own postorder moved other subtrees behind it. */
+            int *parent = malloc(3 * (size_t)n * sizeof *parent), *post = parent + n,
+                *wt = post + n;
+            cholmod_sparse *C1 = parent ? cholmod_ptranspose(M, 1, perm, NULL, 0, &s->cm) : NULL;
+            cholmod_sparse *C2 = C1 ? cholmod_transpose(C1, 1, &s->cm) : NULL;
+            int post_ok = C2 && cholmod_etree(C2, parent, &s->cm);
+            for (int i = 0; post_ok && i < n; i++)
+                wt[i] = i >= m;
+            post_ok = post_ok && cholmod_postorder(parent, (size_t)n, wt, post, &s->cm) == n;
+            for (int i = 0; post_ok && i < n; i++)
+                wt[i] = perm[post[i]];
+            if (post_ok)
+                memcpy(perm, wt, (size_t)n * sizeof *perm);
+            cholmod_free_sparse(&C1, &s->cm);
+            cholmod_free_sparse(&C2, &s->cm);
+            free(parent);
+            int saved = s->cm.method[0].ordering, saved_post = s->cm.postorder;
+            s->cm.method[0].ordering = CHOLMOD_GIVEN;
+            s->cm.postorder = 0;
+            L = post_ok ? cholmod_analyze_p(M, perm, NULL, 0, &s->cm) : NULL;
+            s->cm.method[0].ordering = saved;
+            s->cm.postorder = saved_post;
+            int ok = L && s->cm.status >= CHOLMOD_OK && L->Perm;
+            for (int i = n - k; ok && i < n; i++)
+                ok = mark[((const int *)L->Perm)[i]]; /* still last after the postorder */
+            if (!ok && L)
+                cholmod_free_factor(&L, &s->cm);
+            if (ok)
+                *tail_k = k;
+        }
+    }
+    free(perm);
+    free(mark);
+    return L ? L : cholmod_analyze(M, &s->cm);
+}
+
+/* From a numeric factor L of M whose ordering ends with k tail DOFs: L0 = L's trailing k x k
+ * block and S = A22 - L0 L0^T (k x k, column-major; A22 = M's trailing block in L's order).
+ * pos: n ints of scratch. */
+static void tail_extract(const cholmod_factor *L, const cholmod_sparse *M, int k, double *S,
+                         double *L0, int *pos)
+{
+    int n = (int)L->n, t0 = n - k;
+    const int *perm = L->Perm, *Ls = L->super, *Lpi = L->pi, *Lpx = L->px, *Lrows = L->s;
+    const double *lx = L->x;
+    memset(S, 0, (size_t)k * (size_t)k * sizeof *S);
+    memset(L0, 0, (size_t)k * (size_t)k * sizeof *L0);
+    for (int i = 0; i < n; i++)
+        pos[i] = -1;
+    for (int i = 0; i < k; i++)
+        pos[perm[t0 + i]] = i;
+    const int *Mp = M->p, *Mi = M->i;
+    const double *Mx = M->x;
+    for (int i = 0; i < k; i++) { /* A22 into S: M holds the upper triangle */
+        int q = perm[t0 + i];
+        for (int p = Mp[q]; p < Mp[q + 1]; p++) {
+            int j = pos[Mi[p]];
+            if (j >= 0) {
+                S[i + (size_t)k * j] = Mx[p];
+                S[j + (size_t)k * i] = Mx[p];
+            }
+        }
+    }
+    int sn = (int)L->nsuper - 1;
+    for (int c = n - 1; c >= t0; c--) {
+        while (sn > 0 && Ls[sn] > c)
+            sn--;
+        int nr = Lpi[sn + 1] - Lpi[sn];
+        const double *xc = lx + Lpx[sn] + (size_t)(c - Ls[sn]) * (size_t)nr;
+        for (int r = 0; r < nr; r++) {
+            int row = Lrows[Lpi[sn] + r];
+            if (row >= c)
+                L0[(row - t0) + (size_t)k * (c - t0)] = xc[r];
+        }
+    }
+    for (int j = 0; j < k; j++)
+        for (int i = j; i < k; i++) {
+            double v = S[i + (size_t)k * j];
+            for (int m = 0; m <= j; m++)
+                v -= L0[i + (size_t)k * m] * L0[j + (size_t)k * m];
+            S[i + (size_t)k * j] = v;
+            S[j + (size_t)k * i] = v;
+        }
+}
+
+/* Room for the tail's k x k blocks in the solver and its job. */
+static int tail_alloc(NsSolver *s, int k)
+{
+    size_t need = (size_t)k * (size_t)k + 1;
+    if (need <= s->tail_cap)
+        return 0;
+    double *a = realloc(s->tail_S, need * sizeof *a), *b = NULL, *c = NULL, *d = NULL, *e = NULL;
+    if (a)
+        s->tail_S = a;
+    b = realloc(s->tail_L0, need * sizeof *b);
+    if (b)
+        s->tail_L0 = b;
+    c = realloc(s->tail_D, need * sizeof *c);
+    if (c)
+        s->tail_D = c;
+    d = realloc(s->job.tail_S, need * sizeof *d);
+    if (d)
+        s->job.tail_S = d;
+    e = realloc(s->job.tail_L0, need * sizeof *e);
+    if (e)
+        s->job.tail_L0 = e;
+    if (!a || !b || !c || !d || !e)
+        return -1;
+    s->tail_cap = need;
+    return 0;
+}
+
 /* L = numeric Cholesky factor of M (L has M's analysis). Returns 0, or -1 if M is not
  * positive definite or CHOLMOD failed. Safe on any thread that owns cm. */
 static int factor_numeric(cholmod_sparse *M, cholmod_factor *L, cholmod_common *cm)
@@ -400,8 +573,10 @@ static int factor_sync(NsSolver *s, const NsBlockMatrix *A, int nfree, uint64_t 
     if (!s->Lsym || h != s->pattern || nfree != s->nfree) {
         free_factors(s);
         OmpSerial o = omp_serial_begin();
-        s->Lsym = cholmod_analyze(M, &s->cm);
+        int k = 0;
+        s->Lsym = analyze(s, M, &k);
         omp_serial_end(o);
+        s->tail_k = k > 0 && tail_alloc(s, k) == 0 ? k : 0;
         if (!s->Lsym || s->cm.status < CHOLMOD_OK) {
             if (s->Lsym)
                 cholmod_free_factor(&s->Lsym, &s->cm);
@@ -417,6 +592,16 @@ static int factor_sync(NsSolver *s, const NsBlockMatrix *A, int nfree, uint64_t 
         s->spare = NULL;
     }
     int rc = s->L ? factor_numeric(M, s->L, &s->cm) : -1;
+    s->tail_ok = 0;
+    s->tail_cur = NULL;
+    if (rc == 0 && s->tail_k > 0) {
+        int *pos = malloc((size_t)nfree * sizeof *pos);
+        if (pos) {
+            tail_extract(s->L, M, s->tail_k, s->tail_S, s->tail_L0, pos);
+            s->tail_ok = 1;
+        }
+        free(pos);
+    }
     cholmod_free_sparse(&M, &s->cm);
     st->factorized = 1;
     if (rc) {
@@ -466,6 +651,15 @@ static void *job_main(void *arg)
     cholmod_factor *L = j->L ? j->L : cholmod_copy_factor(j->symbolic, &j->cm);
     if (L && factor_numeric(j->M, L, &j->cm))
         cholmod_free_factor(&L, &j->cm);
+    j->tail_ok = 0;
+    if (L && j->tail_k > 0) {
+        int *pos = malloc(L->n * sizeof *pos);
+        if (pos) {
+            tail_extract(L, j->M, j->tail_k, j->tail_S, j->tail_L0, pos);
+            j->tail_ok = 1;
+        }
+        free(pos);
+    }
     cholmod_free_sparse(&j->M, &j->cm);
     j->L = L;
     j->sf = L ? ns_super_from_cholmod(L) : NULL;
@@ -492,6 +686,7 @@ static int job_launch(NsSolver *s, const NsBlockMatrix *A, const int *dof, int n
     if (!j->M)
         return -1;
     j->symbolic = s->Lsym;
+    j->tail_k = s->tail_k;
     j->L = s->spare;
     s->spare = NULL;
     j->pattern = s->pattern;
@@ -535,6 +730,14 @@ static void job_adopt(NsSolver *s, uint64_t h, int nfree, NsSolveStats *st)
         s->factor_solve = j->made_at;
         s->factors++;
         st->refresh_adopted = 1;
+        double *t = s->tail_S;
+        s->tail_S = j->tail_S;
+        j->tail_S = t;
+        t = s->tail_L0;
+        s->tail_L0 = j->tail_L0;
+        j->tail_L0 = t;
+        s->tail_ok = j->tail_ok && j->tail_k == s->tail_k;
+        s->tail_cur = NULL;
     }
     job_cancel(s); /* frees whatever was not adopted */
 }
@@ -922,4 +1125,122 @@ int ns_solver_factor_adopt(NsSolver *s, int *cols_ok)
     if (!st.refresh_adopted)
         *cols_ok = 0;
     return st.refresh_adopted;
+}
+
+int ns_solver_set_tail(NsSolver *s, const int *nodes, int count)
+{
+    if (!s || count < 0)
+        return -1;
+    if (count > s->tail_req_cap) {
+        int *p = realloc(s->tail_req, (size_t)count * sizeof *p);
+        if (!p)
+            return -1;
+        s->tail_req = p;
+        s->tail_req_cap = count;
+    }
+    if (count > 0)
+        memcpy(s->tail_req, nodes, (size_t)count * sizeof *nodes);
+    s->tail_nreq = count;
+    return 0;
+}
+
+int ns_solver_tail_update(NsSolver *s, const NsBlockMatrix *A)
+{
+    if (!s || !s->L || !s->tail_ok || s->tail_k == 0 || 3 * A->n != s->n3 || s->nsrc != s->nfree)
+        return 0;
+    if (!s->sf && !s->sf_tried) {
+        s->sf = ns_super_from_cholmod(s->L);
+        s->sf_tried = 1;
+    }
+    if (!s->sf || ns_super_n(s->sf) != s->nfree)
+        return 0;
+    int k = s->tail_k, t0 = s->nfree - k;
+    const int *perm = s->L->Perm;
+    double *D = s->tail_D;
+    for (int j = 0; j < k; j++) {
+        int dj = s->dof_src[perm[t0 + j]];
+        for (int i = j; i < k; i++) {
+            int di = s->dof_src[perm[t0 + i]];
+            const double *b = ns_bsm_find(A, di / 3, dj / 3);
+            double a = b ? b[3 * (di % 3) + dj % 3] : 0.0;
+            D[i + (size_t)k * j] = a - s->tail_S[i + (size_t)k * j];
+        }
+    }
+    int ok = 1; /* Cholesky of D in place, lower triangle */
+    for (int j = 0; j < k && ok; j++) {
+        double d = D[j + (size_t)k * j];
+        for (int m = 0; m < j; m++)
+            d -= D[j + (size_t)k * m] * D[j + (size_t)k * m];
+        if (!(d > 0.0) || !isfinite(d)) {
+            ok = 0;
+            break;
+        }
+        d = sqrt(d);
+        D[j + (size_t)k * j] = d;
+        for (int i = j + 1; i < k; i++) {
+            double v = D[i + (size_t)k * j];
+            for (int m = 0; m < j; m++)
+                v -= D[i + (size_t)k * m] * D[j + (size_t)k * m];
+            D[i + (size_t)k * j] = v / d;
+        }
+    }
+    s->tail_cur = ok ? D : s->tail_L0;
+    ns_super_set_tail(s->sf, k, s->tail_cur);
+    return ok ? k : 0;
+}
+
+/* The single-precision copy of the factor in use, made if it was not yet; NULL if it cannot be
+ * (or does not fit the numbering). */
+static NsSuperFactor *copy_in_use(NsSolver *s, int n3)
+{
+    if (!s || !s->L || n3 != s->n3 || s->nsrc != s->nfree)
+        return NULL;
+    if (!s->sf && !s->sf_tried) {
+        s->sf = ns_super_from_cholmod(s->L);
+        s->sf_tried = 1;
+    }
+    return s->sf && ns_super_n(s->sf) == s->nfree ? s->sf : NULL;
+}
+
+int ns_solver_precondition_mid(NsSolver *s, int n3, const double *r, double *z, NsSolverMid mid,
+                               void *ctx)
+{
+    NsSuperFactor *sf = copy_in_use(s, n3);
+    if (!sf)
+        return 1;
+    ns_super_solve_mid(sf, s->dof_src, r, z, loop_threads(s), mid, ctx);
+    for (int k = 0; k < s->nheld; k++)
+        z[s->dof_held[k]] = 0.0;
+    return 0;
+}
+
+int ns_solver_forward_dof(NsSolver *s, int n3, int dof, float *y)
+{
+    NsSuperFactor *sf = copy_in_use(s, n3);
+    if (!sf || dof < 0 || dof >= n3)
+        return -1;
+    int n = s->nfree;
+    if (!y)
+        return n;
+    if (s->iperm_of != sf) {
+        if (ensure((void **)&s->iperm, &s->iperm_cap, n > 0 ? n : 1, sizeof(int)))
+            return -1;
+        const int *perm = ns_super_perm(sf);
+        for (int k = 0; k < n; k++)
+            s->iperm[perm[k]] = k;
+        s->iperm_of = sf;
+    }
+    if (s->dof[dof] < 0)
+        return 0;
+    ns_super_forward_unit(sf, s->iperm[s->dof[dof]], y);
+    return n;
+}
+
+int ns_solver_tail_block(NsSolver *s, int n3, const double **L22)
+{
+    *L22 = NULL;
+    if (!copy_in_use(s, n3) || !s->tail_ok || s->tail_k == 0)
+        return 0;
+    *L22 = s->tail_cur ? s->tail_cur : s->tail_L0;
+    return s->tail_k;
 }

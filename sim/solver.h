@@ -126,5 +126,26 @@ int ns_solver_factor_async(NsSolver *s, const NsBlockMatrix *A, const uint8_t *d
  * *cols_ok says whether its columns were computed), 0 if none was pending or it failed (the old
  * factor stays). */
 int ns_solver_factor_adopt(NsSolver *s, int *cols_ok);
+/* The tail (docs/solvers.md, "The tail"): asks the next symbolic analysis to order the free
+ * DOFs of these nodes last (a copy is kept; count 0 asks for none). Returns 0 or -1 (memory). */
+int ns_solver_set_tail(NsSolver *s, const int *nodes, int count);
+/* Makes the preconditioner's trailing block current: refactors A's tail block minus the rest's
+ * part of the Schur complement, as of the factor in use, into the single-precision copy (so
+ * ns_solver_precondition applies the exact factor of the stale matrix with A's tail block).
+ * Keeps the factor's own block if that is not positive definite. Returns the tail's size in
+ * DOFs if it was updated, else 0 (no tail, no copy). */
+int ns_solver_tail_update(NsSolver *s, const NsBlockMatrix *A);
+/* The trailing block L22 now in the copy (k x k, column-major; *L22 = NULL and 0 without a
+ * tail). Valid until the factor or the tail changes. */
+int ns_solver_tail_block(NsSolver *s, int n3, const double **L22);
+/* ns_solver_precondition with a step between the copy's substitutions (supernodal.h,
+ * ns_super_solve_mid). Returns 0, or 1 if there is no copy (nothing done). */
+typedef void (*NsSolverMid)(void *ctx, float *y, int n, double down, double up);
+int ns_solver_precondition_mid(NsSolver *s, int n3, const double *r, double *z, NsSolverMid mid,
+                               void *ctx);
+/* y = L_f^-1 P e_dof with the copy (y: the free DOF count of floats, zero on entry, in the
+ * copy's numbering). Returns that count (y NULL: only that), 0 for a fixed DOF (y untouched),
+ * -1 without a copy. */
+int ns_solver_forward_dof(NsSolver *s, int n3, int dof, float *y);
 
 #endif

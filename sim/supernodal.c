@@ -586,7 +586,8 @@ static void scales(double big, double *down, double *up)
 
 /* L y = P b's forward and L^T z = y's backward substitutions on the top part, between the
  * bins' (the bins' sums into the top rows taken in a fixed order first). */
-static void solve_top(NsSuperFactor *f, int threads)
+static void solve_top(NsSuperFactor *f, int threads, NsSuperMid mid, void *ctx, double down,
+                      double up)
 {
     sreal *y = f->y;
     for (int i = 0; i < f->ntop_cols; i++) {
@@ -595,11 +596,19 @@ static void solve_top(NsSuperFactor *f, int threads)
     }
     for (int q = 0; q < f->count[TOP]; q++)
         top_super(f, f->list[TOP][q], 0, threads);
+    if (mid)
+        mid(ctx, y, f->n, down, up);
     for (int q = f->count[TOP] - 1; q >= 0; q--)
         top_super(f, f->list[TOP][q], 1, threads);
 }
 
 void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double *x, int threads)
+{
+    ns_super_solve_mid(f, at, b, x, threads, NULL, NULL);
+}
+
+void ns_super_solve_mid(NsSuperFactor *f, const int *at, const double *b, double *x, int threads,
+                        NsSuperMid mid, void *ctx)
 {
     int n = f->n;
 #if NS_HAVE_OPENMP
@@ -607,7 +616,7 @@ void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double 
         /* Each thread scales, gathers and later scatters its own bin's columns (the lighter
          * bin's thread also the top part's) next to its substitutions: the same numbers as the
          * serial path below, with no serial pass over the vectors. */
-        double part[2] = {0.0, 0.0}, up = 1.0;
+        double part[2] = {0.0, 0.0}, up = 1.0, dn = 1.0;
 #pragma omp parallel num_threads(2)
         {
             int me = omp_get_thread_num(), nth = omp_get_num_threads();
@@ -623,11 +632,12 @@ void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double 
                     if (o == f->light) {
                         move_cols(f, TOP, at, b, NULL, down);
                         up = u;
+                        dn = down;
                     }
                     run_bin(f, o, 0);
                 }
         }
-        solve_top(f, threads);
+        solve_top(f, threads, mid, ctx, dn, up);
 #pragma omp parallel num_threads(2)
         {
             int me = omp_get_thread_num(), nth = omp_get_num_threads();
@@ -652,7 +662,7 @@ void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double 
     }
     run_bin(f, 0, 0);
     run_bin(f, 1, 0);
-    solve_top(f, threads);
+    solve_top(f, threads, mid, ctx, down, up);
     run_bin(f, 0, 1);
     run_bin(f, 1, 1);
     for (int o = 0; o < 3; o++)
@@ -662,4 +672,48 @@ void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double 
 void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads)
 {
     ns_super_solve_at(f, NULL, b, x, threads);
+}
+
+const int *ns_super_perm(const NsSuperFactor *f)
+{
+    return f->perm;
+}
+
+/* The supernode holding column c. */
+static int super_of(const NsSuperFactor *f, int c)
+{
+    int lo = 0, hi = f->nsuper - 1;
+    while (lo < hi) {
+        int mid = (lo + hi + 1) / 2;
+        if (f->super[mid] <= c)
+            lo = mid;
+        else
+            hi = mid - 1;
+    }
+    return lo;
+}
+
+void ns_super_set_tail(NsSuperFactor *f, int k, const double *L22)
+{
+    int n = f->n, t0 = n - k;
+    for (int c = t0; c < n; c++) {
+        int s = super_of(f, c), nr = f->pi[s + 1] - f->pi[s];
+        float *xc = f->x + f->px[s] + (size_t)(c - f->super[s]) * (size_t)nr;
+        const int *rw = f->rows + f->pi[s];
+        for (int i = 0; i < nr; i++)
+            if (rw[i] >= c)
+                xc[i] = (float)L22[(size_t)(rw[i] - t0) + (size_t)k * (size_t)(c - t0)];
+    }
+}
+
+void ns_super_forward_unit(NsSuperFactor *f, int k, float *y)
+{
+    /* L e-solve along the elimination tree's path from k's supernode to the root: the only
+     * supernodes whose columns L^-1 e_k reaches. */
+    y[k] = 1.0f;
+    for (int s = super_of(f, k); s >= 0;) {
+        forward(f, &s, 1, 0, y, NULL, f->tbuf[0]);
+        int nc = f->super[s + 1] - f->super[s], nr = f->pi[s + 1] - f->pi[s];
+        s = nr > nc ? super_of(f, f->rows[f->pi[s] + nc]) : -1;
+    }
 }

@@ -46,5 +46,21 @@ void ns_super_solve(NsSuperFactor *f, const double *b, double *x, int threads);
 /* The same with the factored matrix's entry k at b[at[k]] and x[at[k]] (at: n distinct
  * indices; x's other entries are left alone), so a caller's longer vectors need no copies. */
 void ns_super_solve_at(NsSuperFactor *f, const int *at, const double *b, double *x, int threads);
+/* ns_super_solve_at with a step between the forward and the backward substitutions: mid(ctx,
+ * y, n, down, up) gets y = L_f^-1 P b scaled by down (a power of two: y is in float), in the
+ * factor's numbering, and may change it; the backward substitution then runs on what it left
+ * (up = 1 / down). NULL mid: ns_super_solve_at. */
+typedef void (*NsSuperMid)(void *ctx, float *y, int n, double down, double up);
+void ns_super_solve_mid(NsSuperFactor *f, const int *at, const double *b, double *x, int threads,
+                        NsSuperMid mid, void *ctx);
+/* perm: entry k of the factor's numbering is entry perm[k] of the matrix's. */
+const int *ns_super_perm(const NsSuperFactor *f);
+/* y = L_f^-1 e_k in the factor's numbering, in float (y: n floats, all zero on entry; only the
+ * elimination tree's path above k is touched). Not re-entrant (the copy's workspace). */
+void ns_super_forward_unit(NsSuperFactor *f, int k, float *y);
+/* Overwrites the factor's trailing k x k block (its last k columns, rows n-k.. of them) with
+ * L22 (k x k, column-major, lower triangle read), rounded to float: the factor of a matrix
+ * whose trailing block was changed (solver.c's tail update). */
+void ns_super_set_tail(NsSuperFactor *f, int k, const double *L22);
 
 #endif
