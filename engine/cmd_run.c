@@ -305,6 +305,7 @@ static int place_needle(Run *r, const char *what, char *err, int err_sz)
         cp.tau_sol = sp->tolerance;
     if (sp->check_tolerance > 0.0)
         cp.tau_check = sp->check_tolerance;
+    cp.tip_block = sp->tip_block;
     if (cp.tau_check < cp.tau_sol) /* never below (ns.scenario refuses an explicit one) */
         cp.tau_check = cp.tau_sol;
     for (int k = 0; k < sc->region_count; k++)
@@ -996,6 +997,8 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_number(&j, r->c.params.tau_check);
     ns_json_key(&j, "lazy_threshold");
     ns_json_number(&j, r->tissue.params.lazy_threshold);
+    ns_json_key(&j, "tip_block");
+    ns_json_bool(&j, r->c.params.tip_block != 0);
     ns_json_end_object(&j);
     if (r->spec.accuracy > 0.0) { /* the scenario's accuracy = ... (docs/performance.md) */
         ns_json_key(&j, "accuracy");

@@ -310,6 +310,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         spec->tolerance = num_field(L, vi, "tolerance", -1.0);
         spec->check_tolerance = num_field(L, vi, "check_tolerance", -1.0);
         spec->lazy_threshold = num_field(L, vi, "lazy_threshold", -1.0);
+        spec->tip_block = bool_field(L, vi, "tip_block", false);
     }
     lua_settop(L, si);
     if (rc == 0 && raw_field(L, si, "accuracy") == LUA_TTABLE) {

@@ -64,6 +64,7 @@ typedef struct NsRunSpec {
     NsRunCamera camera;
     /* solver = {...}: <= 0 where the scenario leaves the engine's default */
     double tolerance, check_tolerance, lazy_threshold;
+    bool tip_block; /* solver = {tip_block = true} (docs/solvers.md, "The tail") */
     /* accuracy = ...: the tip accuracy asked for [m] (0: none), the front's setting chosen and
      * its measured tip error [m] and cost [ms per simulated s] */
     double accuracy, accuracy_tip_error, accuracy_cost;

@@ -86,6 +86,8 @@ return ns.scenario {
     -- checked a hundred times looser, as the paper does (1e-3 and 1e-5)
     check_tolerance = math.min(0.5, 100 * ns.param("solver.tolerance", 1e-8)),
     lazy_threshold = ns.param("solver.lazy_threshold", 1e-2),
+    -- the stale factor's block at the tip made current every step (docs/solvers.md)
+    tip_block = ns.param("solver.tip_block", false),
   },
   -- `needlesim run ... --set needle.kind=stiff` runs the stiff symmetric needle (ProsSS).
   needle = ns.needle { kind = ns.param("needle.kind", "flexible"), bevel_deg = 30 },

@@ -891,7 +891,7 @@ local SEED_FIELDS = { "target" }
 local CAMERA_FIELDS = { "views", "fps", "frame_every", "cut_normal", "tet_edges",
     "friction_colours" }
 local VIEWS = { side = true, top = true, axis = true }
-local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold" }
+local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold", "tip_block" }
 local ACCURACY_FIELDS = { "tip", "front" }
 
 --- ns.economy(tip, front): the cheapest settings on a measured speed-against-accuracy front
@@ -970,9 +970,11 @@ local function accuracy_of(v, t, where)
         tip_error = r.tip_error, cost = r.cost }
 end
 
--- solver = {tolerance, check_tolerance, lazy_threshold}: the coupled solve's relative residuals
--- (the paper's tau_sol and tau_check, §3.6.1) and the lazy-Jacobian threshold (§3.6.3). The
--- engine's defaults (1e-8, 1e-6, 1e-2) when absent; docs/performance.md measures what they cost.
+-- solver = {tolerance, check_tolerance, lazy_threshold, tip_block}: the coupled solve's relative
+-- residuals (the paper's tau_sol and tau_check, §3.6.1), the lazy-Jacobian threshold (§3.6.3)
+-- and whether the stale factor's block at the tip is made current every step (docs/solvers.md,
+-- "The tail"). The engine's defaults (1e-8, 1e-6, 1e-2, false) when absent;
+-- docs/performance.md measures what they cost.
 local function solver_of(v, where)
     if v == nil then
         return nil
@@ -985,6 +987,7 @@ local function solver_of(v, where)
             "in (0, 1)", OPTIONAL),
         lazy_threshold = a:number("lazy_threshold", function(x) return x >= 0 and x < 1 end,
             "in [0, 1)", OPTIONAL),
+        tip_block = a:boolean("tip_block", false),
     }
     if s.check_tolerance and s.check_tolerance < (s.tolerance or 1e-8) then
         a:fail("check_tolerance (%g) must not be below tolerance (%g%s)", s.check_tolerance,

@@ -67,6 +67,28 @@ struct CoupledSchur {
     int pending;
     int *job_node, job_count, job_cap;
     double *job_B, *job_Z;
+    /* The projection in the middle (docs/coupling.md): for cached slot s and direction d, column
+     * j = 3 s + d, Y_j = L_f^-1 P e_(3 node + d) with the factor's single-precision copy L_f as
+     * it is now (its trailing block made current every step), in the copy's numbering. Below
+     * the tail, sparse: yi/yv from yp[j], yn[j] entries; the tail's k rows: yw (W = L22 y2,
+     * fixed for the factor) and yt (y2 = L22_now^-1 W, refreshed each step). ycount slots are
+     * made; ymode says whether the projection uses them (the copy exists). */
+    int ymode, ycount, yk, yn_free;
+    int *yi;
+    float *yv;
+    size_t ylen, ycap;
+    size_t *yp;
+    int *yn, ycols_cap;
+    double *yw;
+    float *yt;
+    size_t ytail_cap;
+    float *ydense; /* (yn_free) zero between uses */
+    int ydense_cap;
+    double *Cp, *Lp; /* C with L_f (3q x 3q) and its active block's factor */
+    /* The used columns' products (6q), multipliers' terms (6q) and Gram matrix (6q x 6q) */
+    double *yu;
+    int yu_cap;
+    int *yplace, *yuse, yplace_cap; /* each slot's place among the used ones, and the list */
 };
 
 CoupledSchur *coupled_schur_create(void)
@@ -99,6 +121,15 @@ void coupled_schur_destroy(CoupledSchur *w)
     free(w->job_node);
     free(w->job_B);
     free(w->job_Z);
+    free(w->yi);
+    free(w->yv);
+    free(w->yp);
+    free(w->yn);
+    free(w->yw);
+    free(w->yt);
+    free(w->ydense);
+    free(w->yu);
+    free(w->yplace);
     free(w);
 }
 
@@ -116,11 +147,40 @@ static void cache_clear(CoupledSchur *w)
     for (int s = 0; s < w->count; s++)
         w->slot[w->node[s]] = -1;
     w->count = 0;
+    w->ycount = 0;
+    w->ylen = 0;
+}
+
+/* Asks the factor's next analysis to order the tip's ring last (docs/solvers.md, "The tail"):
+ * the tissue nodes of the tip's point and their neighbours in A_t, whose block changes most
+ * from step to step as the tip node slides through the material (Algorithm 2). */
+static void set_tail(CoupledSchur *w, const CoupledSystem *S)
+{
+    int nodes[256], m = 0;
+    if (S->tip >= 0)
+        for (int e = 0; e < 2; e++) {
+            int a;
+            if (point_node(S, S->tip, e, &a) == 0.0)
+                continue;
+            const NsBlockRow *r = &S->At->rows[a];
+            for (int p = 0; p < r->count && m < 256; p++) {
+                int dup = 0;
+                for (int i = 0; i < m && !dup; i++)
+                    dup = nodes[i] == r->col[p];
+                if (!dup)
+                    nodes[m++] = r->col[p];
+            }
+        }
+    ns_solver_set_tail(w->fac, nodes, m);
 }
 
 static int refactor(CoupledSchur *w, const CoupledSystem *S, NsCouplingStats *st)
 {
     cache_clear(w);
+    if (S->c->params.tip_block)
+        set_tail(w, S);
+    else
+        ns_solver_set_tail(w->fac, NULL, 0);
     uint8_t *fx = realloc(w->fixed, (size_t)S->nt3 + 1);
     if (!fx)
         return -1;
@@ -301,7 +361,7 @@ static int adopt_refresh(CoupledSchur *w, const CoupledSystem *S)
 static int ensure_buf(CoupledSchur *w, const CoupledSystem *S)
 {
     size_t q3 = 3 * (size_t)S->q, n = (size_t)(S->nt3 + S->nr3);
-    size_t need = (size_t)S->nr3 * q3 + 2 * q3 * q3 + n + 8 * q3 + 8;
+    size_t need = (size_t)S->nr3 * q3 + 4 * q3 * q3 + n + 9 * q3 + 8;
     if (need > w->buf_cap) {
         double *b = realloc(w->buf, need * sizeof *b);
         if (!b)
@@ -319,8 +379,10 @@ static int ensure_buf(CoupledSchur *w, const CoupledSystem *S)
     w->Zn = w->buf;
     w->C = w->Zn + (size_t)S->nr3 * q3;
     w->L = w->C + q3 * q3;
-    w->sc = w->L + q3 * q3;
-    w->small = w->sc + n; /* 8 vectors of 3q */
+    w->Cp = w->L + q3 * q3;
+    w->Lp = w->Cp + q3 * q3;
+    w->sc = w->Lp + q3 * q3;
+    w->small = w->sc + n; /* 9 vectors of 3q */
     if (6 * (int)S->q + 1 > w->term_cap) {
         int cap = 6 * (int)S->q + 1;
         const double **c = realloc(w->term_col, (size_t)cap * sizeof *c);
@@ -348,12 +410,14 @@ static const double *frame_col(const CoupledSystem *S, int j)
     return S->R + 9 * (j / 3) + 3 * (j % 3);
 }
 
-static int build_compliance(CoupledSchur *w, const CoupledSystem *S, double *nscratch)
+/* C += the tissue part of a compliance: the sum over the tissue point nodes a of k and b of l
+ * of w_a w_b R_k^T M(a, b) R_l, M(a, b) the 3 x 3 block of F^-1 from the cached columns (G NULL)
+ * or of Y_a^T Y_b from the Gram matrix G of the used columns (ng x ng, place: each slot's index
+ * among them). */
+static void add_tissue_part(const CoupledSchur *w, const CoupledSystem *S, double *C,
+                            const double *G, int ng, const int *place)
 {
-    int q3 = 3 * S->q, nt3 = S->nt3, nr3 = S->nr3;
-    double *C = w->C;
-    memset(C, 0, (size_t)q3 * (size_t)q3 * sizeof *C);
-    /* Tissue: sum over the tissue point nodes a of k and b of l of w_a w_b R_k^T F^-1[a,b] R_l. */
+    int q3 = 3 * S->q, nt3 = S->nt3;
     for (int k = 0; k < S->q; k++)
         for (int ea = 0; ea < 2; ea++) {
             int a, b;
@@ -365,11 +429,18 @@ static int build_compliance(CoupledSchur *w, const CoupledSystem *S, double *nsc
                     double wb = point_node(S, l, eb, &b);
                     if (wb == 0.0)
                         continue;
-                    const double *col = w->cols + (size_t)w->slot[b] * 3 * (size_t)nt3;
-                    double M[9]; /* M[3 i + d] = F^-1[3a + i, 3b + d] */
-                    for (int i = 0; i < 3; i++)
-                        for (int d = 0; d < 3; d++)
-                            M[3 * i + d] = col[(size_t)d * (size_t)nt3 + 3 * (size_t)a + i];
+                    double M[9]; /* M[3 i + d] = F^-1[3a + i, 3b + d], or Y_(a,i) . Y_(b,d) */
+                    if (G) {
+                        int pa = place[w->slot[a]], pb = place[w->slot[b]];
+                        for (int i = 0; i < 3; i++)
+                            for (int d = 0; d < 3; d++)
+                                M[3 * i + d] = G[(size_t)(3 * pa + i) * (size_t)ng + 3 * pb + d];
+                    } else {
+                        const double *col = w->cols + (size_t)w->slot[b] * 3 * (size_t)nt3;
+                        for (int i = 0; i < 3; i++)
+                            for (int d = 0; d < 3; d++)
+                                M[3 * i + d] = col[(size_t)d * (size_t)nt3 + 3 * (size_t)a + i];
+                    }
                     for (int c1 = 0; c1 < 3; c1++) {
                         const double *r1 = frame_col(S, 3 * k + c1);
                         for (int c2 = 0; c2 < 3; c2++) {
@@ -383,6 +454,14 @@ static int build_compliance(CoupledSchur *w, const CoupledSystem *S, double *nsc
                     }
                 }
         }
+}
+
+static int build_compliance(CoupledSchur *w, const CoupledSystem *S, double *nscratch)
+{
+    int q3 = 3 * S->q, nr3 = S->nr3;
+    double *C = w->C;
+    memset(C, 0, (size_t)q3 * (size_t)q3 * sizeof *C);
+    add_tissue_part(w, S, C, NULL, 0, NULL);
     /* Needle: Zn column j = A_n^-1 (R_l col at node idx_l), exact band solves. */
     for (int j = 0; j < q3; j++) {
         double *z = w->Zn + (size_t)j * (size_t)nr3;
@@ -396,8 +475,10 @@ static int build_compliance(CoupledSchur *w, const CoupledSystem *S, double *nsc
             for (int c1 = 0; c1 < 3; c1++) {
                 const double *r1 = frame_col(S, 3 * k + c1);
                 const double *zk = z + 3 * S->idx[k];
-                C[(size_t)(3 * k + c1) * (size_t)q3 + j] +=
-                    r1[0] * zk[0] + r1[1] * zk[1] + r1[2] * zk[2];
+                double v = r1[0] * zk[0] + r1[1] * zk[1] + r1[2] * zk[2];
+                C[(size_t)(3 * k + c1) * (size_t)q3 + j] += v;
+                if (w->ymode) /* Cp (build_cp) has the same needle part */
+                    w->Cp[(size_t)(3 * k + c1) * (size_t)q3 + j] += v;
             }
     }
     return 0;
@@ -408,28 +489,22 @@ static int is_active(int s, int col)
     return col > 0 || s == NS_FRICTION_STATIC;
 }
 
-/* Cholesky of the active block of C for the states st into w->L (na x na). A block that is
- * not numerically definite gets a tiny diagonal shift (then the constraints hold only to that
+/* Cholesky of C's active block (w->act, w->na) into L (na x na): a block that is not
+ * numerically definite gets a tiny diagonal shift (then the constraints hold only to that
  * shift's size); a zero block (every active direction fixed on both sides: nothing can move to
- * meet the constraints) fails the step. */
-static int factor_active(CoupledSchur *w, const CoupledSystem *S, const uint8_t *st)
+ * meet the constraints) fails (-1). */
+static int factor_block(const CoupledSchur *w, int q3, const double *C, double *L)
 {
-    int q3 = 3 * S->q, na = 0;
-    for (int j = 0; j < q3; j++)
-        if (is_active(st[j / 3], j % 3))
-            w->act[na++] = j;
-    w->na = na;
+    int na = w->na;
     double dmax = 0.0;
     for (int i = 0; i < na; i++)
-        dmax = fmax(dmax, w->C[(size_t)w->act[i] * (size_t)q3 + w->act[i]]);
+        dmax = fmax(dmax, C[(size_t)w->act[i] * (size_t)q3 + w->act[i]]);
     for (double shift = 0.0;
          shift<1e-4 * dmax + 1e-300; shift = shift> 0 ? 100 * shift : 1e-14 * dmax) {
-        double *L = w->L;
         int ok = 1;
         for (int i = 0; i < na && ok; i++)
             for (int j = 0; j <= i && ok; j++) {
-                double s =
-                    w->C[(size_t)w->act[i] * (size_t)q3 + w->act[j]] + (i == j ? shift : 0.0);
+                double s = C[(size_t)w->act[i] * (size_t)q3 + w->act[j]] + (i == j ? shift : 0.0);
                 for (int k = 0; k < j; k++)
                     s -= L[(size_t)i * (size_t)na + k] * L[(size_t)j * (size_t)na + k];
                 if (i == j) {
@@ -447,11 +522,24 @@ static int factor_active(CoupledSchur *w, const CoupledSystem *S, const uint8_t 
     return -1;
 }
 
+/* The active components for the states st (w->act, w->na) and the Cholesky factors of their
+ * blocks: C's into w->L, and Cp's into w->Lp when the projection uses it. */
+static int factor_active(CoupledSchur *w, const CoupledSystem *S, const uint8_t *st)
+{
+    int q3 = 3 * S->q, na = 0;
+    for (int j = 0; j < q3; j++)
+        if (is_active(st[j / 3], j % 3))
+            w->act[na++] = j;
+    w->na = na;
+    if (factor_block(w, q3, w->C, w->L))
+        return -1;
+    return w->ymode ? factor_block(w, q3, w->Cp, w->Lp) : 0;
+}
+
 /* Solves the active block: y (na) in place. */
-static void solve_active(const CoupledSchur *w, double *y)
+static void solve_active(const CoupledSchur *w, const double *L, double *y)
 {
     int na = w->na;
-    const double *L = w->L;
     for (int i = 0; i < na; i++) {
         double s = y[i];
         for (int k = 0; k < i; k++)
@@ -583,29 +671,324 @@ static double sdot(const double *a, const double *b, int n)
 }
 
 /* Multipliers lam (3q, 0 on inactive components) with C_aa lam_a = rhs_a. */
-static void active_solve(const CoupledSchur *w, const CoupledSystem *S, const double *rhs,
-                         double *lam, double *tmp)
+static void active_solve_with(const CoupledSchur *w, const double *L, const CoupledSystem *S,
+                              const double *rhs, double *lam, double *tmp)
 {
     for (int i = 0; i < w->na; i++)
         tmp[i] = rhs[w->act[i]];
-    solve_active(w, tmp);
+    solve_active(w, L, tmp);
     memset(lam, 0, 3 * (size_t)S->q * sizeof *lam);
     for (int i = 0; i < w->na; i++)
         lam[w->act[i]] = tmp[i];
 }
 
+static void active_solve(const CoupledSchur *w, const CoupledSystem *S, const double *rhs,
+                         double *lam, double *tmp)
+{
+    active_solve_with(w, w->L, S, rhs, lam, tmp);
+}
+
+/* ---- the projection in the middle (docs/coupling.md) ---- */
+
+/* Room for `more` entries in the pool of the columns' parts below the tail. */
+static int y_pool(CoupledSchur *w, size_t more)
+{
+    if (w->ylen + more <= w->ycap)
+        return 0;
+    size_t cap = w->ylen + more > 2 * w->ycap ? w->ylen + more : 2 * w->ycap;
+    int *ii = realloc(w->yi, cap * sizeof *ii);
+    if (ii)
+        w->yi = ii;
+    float *vv = realloc(w->yv, cap * sizeof *vv);
+    if (vv)
+        w->yv = vv;
+    if (!ii || !vv)
+        return -1;
+    w->ycap = cap;
+    return 0;
+}
+
+/* Makes the columns Y of the slots cached since the last call (with the copy as it is now, its
+ * tail block current) and refreshes every column's tail rows for the tail block now. Sets
+ * ymode (0: no copy, the projection uses F's own columns). Returns 0 or -1 (memory). */
+static int y_prepare(CoupledSchur *w, const CoupledSystem *S)
+{
+    w->ymode = 0;
+    int nt3 = S->nt3;
+    int nf = ns_solver_forward_dof(w->fac, nt3, 0, NULL);
+    if (nf <= 0)
+        return 0;
+    const double *L22;
+    int k = ns_solver_tail_block(w->fac, nt3, &L22);
+    if (w->ycount > 0 && (k != w->yk || nf != w->yn_free)) {
+        w->ycount = 0;
+        w->ylen = 0;
+    }
+    w->yk = k;
+    w->yn_free = nf;
+    int ncol = 3 * w->count, t0 = nf - k;
+    if (ncol > w->ycols_cap) {
+        size_t *yp = realloc(w->yp, (size_t)ncol * sizeof *yp);
+        if (yp)
+            w->yp = yp;
+        int *yn = realloc(w->yn, (size_t)ncol * sizeof *yn);
+        if (yn)
+            w->yn = yn;
+        if (!yp || !yn)
+            return -1;
+        w->ycols_cap = ncol;
+    }
+    size_t tail_need = (size_t)ncol * (size_t)k + 1;
+    if (tail_need > w->ytail_cap) {
+        double *yw = realloc(w->yw, tail_need * sizeof *yw);
+        if (yw)
+            w->yw = yw;
+        float *yt = realloc(w->yt, tail_need * sizeof *yt);
+        if (yt)
+            w->yt = yt;
+        if (!yw || !yt)
+            return -1;
+        w->ytail_cap = tail_need;
+    }
+    if (nf > w->ydense_cap) {
+        free(w->ydense);
+        w->ydense = calloc((size_t)nf, sizeof *w->ydense);
+        if (!w->ydense) {
+            w->ydense_cap = 0;
+            return -1;
+        }
+        w->ydense_cap = nf;
+    }
+    int need = 12 * S->q + 36 * S->q * S->q + 1, pneed = w->count + 2 * S->q + 1;
+    if (need > w->yu_cap) {
+        double *u = realloc(w->yu, (size_t)need * sizeof *u);
+        if (!u)
+            return -1;
+        w->yu = u;
+        w->yu_cap = need;
+    }
+    if (pneed > w->yplace_cap) {
+        int *pl = realloc(w->yplace, (size_t)pneed * sizeof *pl);
+        if (!pl)
+            return -1;
+        w->yplace = pl;
+        w->yplace_cap = pneed;
+    }
+    float *y = w->ydense;
+    for (int j = 3 * w->ycount; j < ncol; j++) {
+        double *yw = w->yw + (size_t)j * (size_t)k;
+        w->yp[j] = w->ylen;
+        w->yn[j] = 0;
+        int r = ns_solver_forward_dof(w->fac, nt3, 3 * w->node[j / 3] + j % 3, y);
+        if (r < 0) {
+            w->ycount = 0;
+            w->ylen = 0;
+            return 0;
+        }
+        if (r == 0) { /* a fixed DOF: no column */
+            memset(yw, 0, (size_t)k * sizeof *yw);
+            continue;
+        }
+        int cnt = 0;
+        for (int i = 0; i < t0; i++)
+            cnt += y[i] != 0.0f;
+        if (y_pool(w, (size_t)cnt))
+            return -1;
+        for (int i = 0; i < t0; i++)
+            if (y[i] != 0.0f) {
+                w->yi[w->ylen] = i;
+                w->yv[w->ylen++] = y[i];
+                y[i] = 0.0f;
+            }
+        w->yn[j] = cnt;
+        for (int i = 0; i < k; i++) { /* W = L22 y2: what the tail's solve started from */
+            double v = 0.0;
+            for (int m = 0; m <= i; m++)
+                v += L22[i + (size_t)k * m] * (double)y[t0 + m];
+            yw[i] = v;
+        }
+        for (int i = 0; i < k; i++)
+            y[t0 + i] = 0.0f;
+    }
+    w->ycount = w->count;
+    for (int j = 0; j < ncol; j++) { /* y2 = L22_now^-1 W */
+        const double *yw = w->yw + (size_t)j * (size_t)k;
+        float *yt = w->yt + (size_t)j * (size_t)k;
+        for (int i = 0; i < k; i++) {
+            double v = yw[i];
+            for (int m = 0; m < i; m++)
+                v -= L22[i + (size_t)k * m] * (double)yt[m];
+            yt[i] = (float)(v / L22[i + (size_t)k * i]);
+        }
+    }
+    w->ymode = 1;
+    return 0;
+}
+
+/* The slots the coupling points use, in order of first use: *use lists them, place[slot] is a
+ * slot's index in that list (-1: unused). Returns their count. */
+static int y_used(const CoupledSchur *w, const CoupledSystem *S, int **place, int **use)
+{
+    int *pl = w->yplace, *us = pl + w->count, nuse = 0;
+    for (int s = 0; s < w->count; s++)
+        pl[s] = -1;
+    for (int k = 0; k < S->q; k++)
+        for (int e = 0; e < 2; e++) {
+            int a;
+            if (point_node(S, k, e, &a) == 0.0 || pl[w->slot[a]] >= 0)
+                continue;
+            pl[w->slot[a]] = nuse;
+            us[nuse++] = w->slot[a];
+        }
+    *place = pl;
+    *use = us;
+    return nuse;
+}
+
+/* Y_j . y (y in the copy's numbering, t0 its first tail row). */
+static double ycol_dot(const CoupledSchur *w, int j, const float *y, int t0)
+{
+    const int *ii = w->yi + w->yp[j];
+    const float *vv = w->yv + w->yp[j];
+    double sum = 0.0;
+    for (int e = 0; e < w->yn[j]; e++)
+        sum += (double)(vv[e] * y[ii[e]]);
+    const float *yt = w->yt + (size_t)j * (size_t)w->yk;
+    for (int t = 0; t < w->yk; t++)
+        sum += (double)(yt[t] * y[t0 + t]);
+    return sum;
+}
+
+/* Cp's tissue part: the sum over the tissue point nodes a of k and b of l of
+ * w_a w_b R_k^T (Y_a^T Y_b) R_l (build_compliance adds the needle's part). */
+static void build_cp(CoupledSchur *w, const CoupledSystem *S)
+{
+    int q3 = 3 * S->q, *place, *use, nuse = y_used(w, S, &place, &use), ng = 3 * nuse;
+    int t0 = w->yn_free - w->yk;
+    double *G = w->yu + 12 * S->q; /* (ng x ng) Gram matrix of the used columns */
+    float *y = w->ydense;
+    for (int a = 0; a < ng; a++) {
+        int ja = 3 * use[a / 3] + a % 3;
+        for (int e = 0; e < w->yn[ja]; e++)
+            y[w->yi[w->yp[ja] + e]] = w->yv[w->yp[ja] + e];
+        for (int t = 0; t < w->yk; t++)
+            y[t0 + t] = w->yt[(size_t)ja * (size_t)w->yk + t];
+        for (int b = 0; b <= a; b++) {
+            int jb = 3 * use[b / 3] + b % 3;
+            double v = ycol_dot(w, jb, y, t0);
+            G[(size_t)a * (size_t)ng + b] = v;
+            G[(size_t)b * (size_t)ng + a] = v;
+        }
+        for (int e = 0; e < w->yn[ja]; e++)
+            y[w->yi[w->yp[ja] + e]] = 0.0f;
+        for (int t = 0; t < w->yk; t++)
+            y[t0 + t] = 0.0f;
+    }
+    memset(w->Cp, 0, (size_t)q3 * (size_t)q3 * sizeof *w->Cp);
+    add_tissue_part(w, S, w->Cp, G, ng, place);
+}
+
+typedef struct MidCtx {
+    CoupledSchur *w;
+    const CoupledSystem *S;
+    const double *gn0; /* A_n^-1 r_n */
+    double *lam, *h, *tmp;
+} MidCtx;
+
+/* Between the copy's substitutions, with y = L_f^-1 P r_t (scaled by down): the multipliers v
+ * of [F_f B^T; B 0] [g; v] = [r; 0] from h = B (F_f^-1 r_t, A_n^-1 r_n), whose tissue part is
+ * Y^T y, and then y -= L_f^-1 P G_t v (a sum of Y's columns), so that the backward substitution
+ * gives F_f^-1 (r_t - G_t v). */
+static void mid_project(void *ctx, float *y, int n, double down, double up)
+{
+    MidCtx *m = ctx;
+    CoupledSchur *w = m->w;
+    const CoupledSystem *S = m->S;
+    int t0 = n - w->yk, *place, *use, nuse = y_used(w, S, &place, &use);
+    double *u = w->yu, *coef = u + 6 * S->q;
+    for (int p = 0; p < 3 * nuse; p++)
+        u[p] = up * ycol_dot(w, 3 * use[p / 3] + p % 3, y, t0);
+    for (int k = 0; k < S->q; k++) {
+        double pt[3] = {0.0, 0.0, 0.0};
+        for (int e = 0; e < 2; e++) {
+            int a;
+            double wt = point_node(S, k, e, &a);
+            if (wt == 0.0)
+                continue;
+            for (int i = 0; i < 3; i++)
+                pt[i] += wt * u[3 * place[w->slot[a]] + i];
+        }
+        for (int i = 0; i < 3; i++)
+            pt[i] -= m->gn0[3 * S->idx[k] + i];
+        for (int col = 0; col < 3; col++) {
+            const double *r = S->R + 9 * k + 3 * col;
+            m->h[3 * k + col] = r[0] * pt[0] + r[1] * pt[1] + r[2] * pt[2];
+        }
+    }
+    active_solve_with(w, w->Lp, S, m->h, m->lam, m->tmp);
+    memset(coef, 0, 3 * (size_t)nuse * sizeof *coef);
+    for (int k = 0; k < S->q; k++) {
+        double g[3] = {0, 0, 0};
+        for (int col = 0; col < 3; col++)
+            for (int i = 0; i < 3; i++)
+                g[i] += S->R[9 * k + 3 * col + i] * m->lam[3 * k + col];
+        for (int e = 0; e < 2; e++) {
+            int a;
+            double wt = point_node(S, k, e, &a);
+            if (wt == 0.0)
+                continue;
+            for (int d = 0; d < 3; d++)
+                coef[3 * place[w->slot[a]] + d] += wt * g[d];
+        }
+    }
+    for (int p = 0; p < 3 * nuse; p++) {
+        if (coef[p] == 0.0)
+            continue;
+        int j = 3 * use[p / 3] + p % 3;
+        float c = (float)(down * coef[p]);
+        const int *ii = w->yi + w->yp[j];
+        const float *vv = w->yv + w->yp[j];
+        for (int e = 0; e < w->yn[j]; e++)
+            y[ii[e]] -= c * vv[e];
+        const float *yt = w->yt + (size_t)j * (size_t)w->yk;
+        for (int t = 0; t < w->yk; t++)
+            y[t0 + t] -= c * yt[t];
+    }
+}
+
 /* The projection: g = the preconditioned residual in the constraints' null space, v its
  * multipliers, [F~ B^T; B 0] [g; v] = [r; 0] (F~ = diag(F, A_n) for the active rows). */
-static int project(const CoupledSchur *w, const CoupledSystem *S, const double *r, double *g,
-                   double *v, double *h, double *tmp)
+static int project(CoupledSchur *w, const CoupledSystem *S, const double *r, double *g, double *v,
+                   double *h, double *tmp)
 {
-    int nt3 = S->nt3;
+    int nt3 = S->nt3, q3 = 3 * S->q;
+    memset(g + nt3, 0, (size_t)S->nr3 * sizeof *g);
+    ns_banded_solve_factored(S->Ar, S->rfixed, r + nt3, g + nt3, NULL);
+    if (w->ymode) {
+        MidCtx m = {w, S, g + nt3, v, h, tmp};
+        if (ns_solver_precondition_mid(w->fac, nt3, r, g, mid_project, &m) == 0) {
+            for (int j = 0; j < q3; j++) { /* the needle's part: g_n += A_n^-1 G_n v */
+                if (v[j] == 0.0)
+                    continue;
+                const double *z = w->Zn + (size_t)j * (size_t)S->nr3;
+                for (int i = 0; i < S->nr3; i++)
+                    g[nt3 + i] += v[j] * z[i];
+            }
+            /* The float substitutions leave B g at ~1e-7 of g's scale: met exactly by one
+             * projection with the factor's own double columns, which C holds. */
+            double *v2 = w->small + 8 * (size_t)q3;
+            constraint_rows(S, g, g + nt3, h);
+            active_solve(w, S, h, v2, tmp);
+            add_response(w, S, v2, g, g + nt3);
+            for (int j = 0; j < q3; j++)
+                v[j] += v2[j];
+            return 0;
+        }
+    }
     /* F^-1 with the factor's single-precision copy: a preconditioner needs no more; C and the
      * cached columns below stay double, so every iterate still meets the constraints. */
     if (ns_solver_precondition(w->fac, nt3, r, g))
         return -1;
-    memset(g + nt3, 0, (size_t)S->nr3 * sizeof *g);
-    ns_banded_solve_factored(S->Ar, S->rfixed, r + nt3, g + nt3, NULL);
     constraint_rows(S, g, g + nt3, h);
     active_solve(w, S, h, v, tmp);
     add_response(w, S, v, g, g + nt3);
@@ -755,10 +1138,27 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
     return S->converged || it < cap ? 0 : 1;
 }
 
+/* What the step's solves need from the factor in use: the columns of the coupled nodes
+ * (F^-1 e, double) and the compliance C, and with tip_block its trailing block made current
+ * (docs/solvers.md, "The tail"), the projection's columns Y and Cp. Returns 0 or -1. */
+static int prepare(CoupledSchur *w, const CoupledSystem *S, double *nscratch)
+{
+    int on = S->c->params.tip_block;
+    if (on)
+        ns_solver_tail_update(w->fac, S->At);
+    else
+        w->ymode = 0;
+    if (cache_fill(w, S) || (on && y_prepare(w, S)))
+        return -1;
+    if (w->ymode)
+        build_cp(w, S);
+    return build_compliance(w, S, nscratch);
+}
+
 /* Refactor now (the stale factor failed): the cache and C follow. */
 static int refresh_now(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st, double *nscratch)
 {
-    if (refactor(w, S, st) || cache_fill(w, S) || build_compliance(w, S, nscratch))
+    if (refactor(w, S, st) || prepare(w, S, nscratch))
         return -1;
     w->refreshed = 1;
     return factor_active(w, S, S->st);
@@ -858,7 +1258,7 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
      * compliance's 3q solves and one solve per PCG iteration. */
     if (rc == 0 && ns_banded_factor(S->Ar, S->rfixed))
         rc = -1;
-    if (rc == 0 && (cache_fill(w, S) || build_compliance(w, S, nscratch)))
+    if (rc == 0 && prepare(w, S, nscratch))
         rc = -1;
     TriedSet T = {0, 0, q, NULL};
     int have_base = 0;

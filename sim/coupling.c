@@ -46,6 +46,7 @@ NsCouplingParams ns_default_coupling_params(void)
     p.solver = NS_COUPLED_SCHUR;
     p.threads = 1;
     p.refresh_iterations = 10;
+    p.tip_block = 0;
     p.remesh_dihedral_floor = 12.0;
     p.bevel_model = NS_BEVEL_FORCE;
     for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++) {

@@ -97,6 +97,11 @@ typedef struct NsCouplingParams {
      * tissue matrix, adopted at the next step (10: a factorization and its columns cost about
      * ten iterations; lower pays only with a second core, docs/coupling.md) */
     int refresh_iterations;
+    /* schur: order the tip's ring last in the tissue factor and make its block current every
+     * step, projecting between the preconditioner's substitutions (docs/solvers.md, "The
+     * tail"): about a fifth fewer PCG iterations. 0 by default: docs/performance.md, "The
+     * twenty-sixth stop", says why */
+    int tip_block;
     /* 0: the tip cuts along the pre-laid path (sim/needle_path.h); 1: the tissue is remeshed
      * at the tip every step it slides (Algorithm 2, sim/remesh.h), the path then being the
      * needle's chain of tissue nodes with the tip at its last node */

@@ -403,7 +403,7 @@ fi
 
 # solver = {...} reaches the step (report.solver_settings); accuracy = ... runs with the measured
 # front's cheapest setting within it (report.accuracy, docs/performance.md).
-sed 's/^    name = "tutorial",/    name = "tutorial", solver = { tolerance = 1e-5, lazy_threshold = 0 },/' \
+sed 's/^    name = "tutorial",/    name = "tutorial", solver = { tolerance = 1e-5, lazy_threshold = 0, tip_block = true },/' \
     "$TUT" >"$TMP/solver.lua"
 sed 's/^    dt = 0.01, -- time step \[s\]$/    accuracy = 0.025,/' "$TUT" >"$TMP/accuracy.lua"
 "$BIN" run "$TMP/solver.lua" -o "$TMP/sv" --steps 20 --no-render --quiet >/dev/null 2>"$TMP/err_sv"
@@ -416,6 +416,7 @@ import json, re, sys
 s = json.load(open(sys.argv[1]))["solver_settings"]
 # check_tolerance: the engine's 1e-6, raised to the tolerance (never below it)
 assert (s["tolerance"], s["check_tolerance"], s["lazy_threshold"]) == (1e-5, 1e-5, 0), s
+assert s["tip_block"] is True, s
 r = json.load(open(sys.argv[2]))
 a = r["accuracy"]
 assert a["tip_m"] == 0.025 and a["front"] == "phantom" and a["measured_tip_error_m"] <= 0.025, a
