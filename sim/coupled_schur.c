@@ -88,7 +88,7 @@ struct CoupledSchur {
     /* The used columns' products (6q), multipliers' terms (6q) and Gram matrix (6q x 6q) */
     double *yu;
     int yu_cap;
-    int *yplace, *yuse, yplace_cap; /* each slot's place among the used ones, and the list */
+    int *yplace, yplace_cap; /* each slot's place among the used ones, then the list (y_used) */
 };
 
 CoupledSchur *coupled_schur_create(void)
@@ -792,8 +792,12 @@ static int y_prepare(CoupledSchur *w, const CoupledSystem *S)
         int cnt = 0;
         for (int i = 0; i < t0; i++)
             cnt += y[i] != 0.0f;
-        if (y_pool(w, (size_t)cnt))
+        if (y_pool(w, (size_t)cnt)) {
+            memset(y, 0, (size_t)nf * sizeof *y); /* zero between uses */
+            w->ycount = 0;
+            w->ylen = 0;
             return -1;
+        }
         for (int i = 0; i < t0; i++)
             if (y[i] != 0.0f) {
                 w->yi[w->ylen] = i;
@@ -957,7 +961,8 @@ static void mid_project(void *ctx, float *y, int n, double down, double up)
 }
 
 /* The projection: g = the preconditioned residual in the constraints' null space, v its
- * multipliers, [F~ B^T; B 0] [g; v] = [r; 0] (F~ = diag(F, A_n) for the active rows). */
+ * multipliers, [F~ B^T; B 0] [g; v] = [r; 0] (F~ = diag(F, A_n) for the active rows; with
+ * tip_block F's copy with its tail block current, projected between the substitutions). */
 static int project(CoupledSchur *w, const CoupledSystem *S, const double *r, double *g, double *v,
                    double *h, double *tmp)
 {
