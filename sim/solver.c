@@ -779,19 +779,36 @@ static int apply_factor(NsSolver *s, int n3, const double *r, double *z)
 
 /* z ~ A^-1 r on the free DOFs for preconditioning: with the factor's single-precision copy
  * (supernodal.h) on this solve's loop threads, else with CHOLMOD's solve. */
-static int precondition(NsSolver *s, int n3, const double *r, double *z)
+/* The single-precision copy of the factor in use, made if it was not yet; NULL if it cannot be
+ * (or does not fit the numbering). */
+static NsSuperFactor *copy_in_use(NsSolver *s, int n3)
 {
-    if (!s->sf && !s->sf_tried && s->L) {
+    if (!s || !s->L || n3 != s->n3 || s->nsrc != s->nfree)
+        return NULL;
+    if (!s->sf && !s->sf_tried) {
         s->sf = ns_super_from_cholmod(s->L);
         s->sf_tried = 1;
     }
-    if (!s->sf || ns_super_n(s->sf) != s->nfree || s->nsrc != s->nfree || n3 != s->n3)
-        return apply_factor(s, n3, r, z); /* no copy (or a numbering it does not fit) */
-    /* Straight between the full-length vectors and the factor's numbering (dof_src), the held
-     * entries zeroed after (r and z may be the same array). */
-    ns_super_solve_at(s->sf, s->dof_src, r, z, loop_threads(s));
+    return s->sf && ns_super_n(s->sf) == s->nfree ? s->sf : NULL;
+}
+
+/* The copy's substitutions between full-length vectors and the factor's numbering (dof_src),
+ * with mid between them (NULL: none); the held entries zeroed after (r and z may be the same
+ * array). */
+static void solve_copy(NsSolver *s, NsSuperFactor *sf, const double *r, double *z, NsSolverMid mid,
+                       void *ctx)
+{
+    ns_super_solve_mid(sf, s->dof_src, r, z, loop_threads(s), mid, ctx);
     for (int k = 0; k < s->nheld; k++)
         z[s->dof_held[k]] = 0.0;
+}
+
+static int precondition(NsSolver *s, int n3, const double *r, double *z)
+{
+    NsSuperFactor *sf = copy_in_use(s, n3);
+    if (!sf)
+        return apply_factor(s, n3, r, z); /* no copy (or a numbering it does not fit) */
+    solve_copy(s, sf, r, z, NULL, NULL);
     return 0;
 }
 
@@ -1146,13 +1163,7 @@ int ns_solver_set_tail(NsSolver *s, const int *nodes, int count)
 
 int ns_solver_tail_update(NsSolver *s, const NsBlockMatrix *A)
 {
-    if (!s || !s->L || !s->tail_ok || s->tail_k == 0 || 3 * A->n != s->n3 || s->nsrc != s->nfree)
-        return 0;
-    if (!s->sf && !s->sf_tried) {
-        s->sf = ns_super_from_cholmod(s->L);
-        s->sf_tried = 1;
-    }
-    if (!s->sf || ns_super_n(s->sf) != s->nfree)
+    if (!s || !s->tail_ok || s->tail_k == 0 || !copy_in_use(s, 3 * A->n))
         return 0;
     int k = s->tail_k, t0 = s->nfree - k;
     const int *perm = s->L->Perm;
@@ -1189,28 +1200,13 @@ int ns_solver_tail_update(NsSolver *s, const NsBlockMatrix *A)
     return ok ? k : 0;
 }
 
-/* The single-precision copy of the factor in use, made if it was not yet; NULL if it cannot be
- * (or does not fit the numbering). */
-static NsSuperFactor *copy_in_use(NsSolver *s, int n3)
-{
-    if (!s || !s->L || n3 != s->n3 || s->nsrc != s->nfree)
-        return NULL;
-    if (!s->sf && !s->sf_tried) {
-        s->sf = ns_super_from_cholmod(s->L);
-        s->sf_tried = 1;
-    }
-    return s->sf && ns_super_n(s->sf) == s->nfree ? s->sf : NULL;
-}
-
 int ns_solver_precondition_mid(NsSolver *s, int n3, const double *r, double *z, NsSolverMid mid,
                                void *ctx)
 {
     NsSuperFactor *sf = copy_in_use(s, n3);
     if (!sf)
         return 1;
-    ns_super_solve_mid(sf, s->dof_src, r, z, loop_threads(s), mid, ctx);
-    for (int k = 0; k < s->nheld; k++)
-        z[s->dof_held[k]] = 0.0;
+    solve_copy(s, sf, r, z, mid, ctx);
     return 0;
 }
 
