@@ -144,6 +144,7 @@ typedef struct Run {
     Series step_ms, total_ms, lcp_ms, tissue_ms, needle_ms, remesh_ms, trials, iterations;
     long steps;
     int consistent, nan, inverted, unconverged, lcp_unresolved;
+    int repaired; /* tissue nodes moved by the remesher's repair (ns_remesh_repair) */
     double max_axial, last_axial, path_cut, wall_s, last_tip[3];
     NsMesh orig; /* the tissue's mesh as built: every needle's exit restores it */
     bool have_orig;
@@ -1052,6 +1053,8 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_number(&j, q.min_dihedral_deg);
     ns_json_key(&j, "max_dihedral_deg");
     ns_json_number(&j, q.max_dihedral_deg);
+    ns_json_key(&j, "remesh_repaired_nodes");
+    ns_json_int(&j, r->repaired);
     ns_json_end_object(&j);
     ns_json_key(&j, "needle");
     ns_json_begin_object(&j);
@@ -1704,6 +1707,7 @@ static int run_loop(Run *r, char *err, int err_sz)
         r->steps++;
         r->exited |= st.exited;
         r->inverted += st.inverted;
+        r->repaired += st.remesh_repaired;
         r->unconverged += st.unconverged;
         r->consistent += st.consistent != 0;
         r->lcp_unresolved += st.consistent == 0;

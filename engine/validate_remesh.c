@@ -1000,6 +1000,7 @@ typedef struct Cycle {
                           before the last 20 of the withdrawal [deg] */
     double dmin_all;   /* the same over every step */
     int ops[5];
+    int repaired; /* nodes moved by the remesher's repair */
     char first_failure[300];
 } Cycle;
 
@@ -1035,11 +1036,12 @@ static int one_cycle(NsTissue *tissue, const NsMesh *orig, int cycle, Cycle *cy,
             break;
         }
         cy->ops[st.remesh_kind]++;
+        cy->repaired += st.remesh_repaired;
         cy->exited = st.exited;
         if (getenv("NS_VALIDATE_TRACE")) /* cycle, step, withdrawing, depth, op, undo, angles */
-            fprintf(stderr, "TR %d %d %d %.2f %d %d %.2f %.2f\n", cycle, k, cy->in_steps != 0,
+            fprintf(stderr, "TR %d %d %d %.2f %d %d %.2f %.2f %d\n", cycle, k, cy->in_steps != 0,
                     1e3 * depth, st.remesh_kind, st.remesh_undone, st.min_dihedral_deg,
-                    st.max_dihedral_deg);
+                    st.max_dihedral_deg, st.remesh_repaired);
         if (!cy->exited && !c.outside) {
             cy->dmin_all = fmin(cy->dmin_all, st.min_dihedral_deg);
             if (cy->in_steps)
@@ -1102,7 +1104,7 @@ static int remesh_cycles(NsValidateResult *r)
         return fail(r, err);
     }
     double dmin = 180.0, dmax = 0.0, dmin_all = 180.0, back = 0.0;
-    int drift = 0, failures = 0, ops[5] = {0}, steps = 0;
+    int drift = 0, failures = 0, ops[5] = {0}, steps = 0, repaired = 0;
     char first[300] = "";
     for (int cyc = 0; cyc < 20 && rc == 0; cyc++) {
         Cycle cy;
@@ -1121,6 +1123,7 @@ static int remesh_cycles(NsValidateResult *r)
         for (int k = 0; k < 5; k++)
             ops[k] += cy.ops[k];
         steps += cy.steps;
+        repaired += cy.repaired;
         if (cy.structure_failures && failures == 0)
             snprintf(first, sizeof first, "%s", cy.first_failure);
         failures += cy.structure_failures;
@@ -1146,9 +1149,10 @@ static int remesh_cycles(NsValidateResult *r)
                            "initial mesh's [%.1f, %.1f] widened to the paper's 10.3 and 160); "
                            "worst over every step %.1f deg; topology differs from the original "
                            "after %d cycles; nodes back within %.1e m; remesh: %d snaps, %d "
-                           "edge, %d face, %d tet splits; structural failures %d%s%s",
+                           "edge, %d face, %d tet splits, %d nodes moved by the repair; "
+                           "structural failures %d%s%s",
                            steps, dmin, dmax, lo, hi, lo0, hi0, dmin_all, drift, back, ops[1],
-                           ops[2], ops[3], ops[4], failures, failures ? ": " : "", first);
+                           ops[2], ops[3], ops[4], repaired, failures, failures ? ": " : "", first);
     }
     ns_tissue_free(&tissue);
     ns_mesh_free(&orig);

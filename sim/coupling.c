@@ -672,6 +672,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
             len++;
         }
         hint = tip.hint_tet;
+        st->remesh_repaired += res.repaired;
         st->cutting |= res.kind != NS_REMESH_NONE && penetrating;
     }
     if (rc == 0) {

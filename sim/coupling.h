@@ -142,6 +142,7 @@ typedef struct NsCouplingStats {
      * of the tets around the needle's last three tissue nodes after it [deg] */
     int remesh_kind, remesh_undone, remesh_candidates;
     int remesh_substeps; /* pieces the tip's move was cut into (§3.4.1; 1 = none, 0 = no remesh) */
+    int remesh_repaired; /* nodes moved by the remesher's repair (ns_remesh_repair), all pieces */
     int exited;          /* remesh: the needle was withdrawn out of the tissue this step */
     int exit_undone;     /* ... and the splits the exit had to undo beyond the one that made
                             the tip's node (after skin entry: the entry's own surface split, if

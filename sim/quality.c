@@ -129,6 +129,30 @@ double ns_tet_min_dihedral(const double *p0, const double *p1, const double *p2,
     return ang < 180.0 ? ang : 180.0;
 }
 
+double ns_tet_dihedral_range(const double *p0, const double *p1, const double *p2, const double *p3,
+                             double *max_deg)
+{
+    const double *p[4] = {p0, p1, p2, p3};
+    double n[4][3];
+    if (!face_normals(p, n)) {
+        *max_deg = 180.0;
+        return 0.0;
+    }
+    /* The largest cosine gives the smallest angle, the smallest cosine the largest. */
+    double cmax = -INFINITY, cmin = INFINITY;
+    for (int e = 0; e < 6; e++) {
+        double c = edge_cos(n, e);
+        cmax = c > cmax ? c : cmax;
+        cmin = c < cmin ? c : cmin;
+    }
+    if (cmax == -INFINITY) { /* every cosine NaN */
+        *max_deg = 180.0;
+        return 0.0;
+    }
+    *max_deg = fmin(acos(cmin) * (180.0 / M_PI), 180.0);
+    return fmin(acos(cmax) * (180.0 / M_PI), 180.0);
+}
+
 void ns_mesh_quality(const NsMesh *m, bool use_world, NsQualityStats *out)
 {
     NsQualityStats s = {0, 180.0, 0.0, DBL_MAX, 0, -1};

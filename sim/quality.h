@@ -20,6 +20,10 @@ double ns_tet_dihedrals(const double *p0, const double *p1, const double *p2, co
 /* ns_tet_dihedrals' minimum from one acos (of the largest cosine) instead of six: the same
  * value, acos being monotone (tests/test_quality.c compares them). */
 double ns_tet_min_dihedral(const double *p0, const double *p1, const double *p2, const double *p3);
+/* The smallest and (into *max_deg) the largest dihedral angle [deg] from two acos: the same
+ * values as ns_tet_dihedrals' minimum and maximum. A degenerate tet gives 0 and 180. */
+double ns_tet_dihedral_range(const double *p0, const double *p1, const double *p2, const double *p3,
+                             double *max_deg);
 
 typedef struct NsQualityStats {
     int tets;

@@ -371,16 +371,35 @@ void ns_remesh_release_all(NsMesh *m, NsRemeshStack *s)
 
 int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3])
 {
-    if (!ns_mesh_node_alive(m, n) || m->node_tets[n].count == 0)
+    return ns_remesh_snap_all(m, s, &n, u, 1);
+}
+
+int ns_remesh_snap_all(NsMesh *m, NsRemeshStack *s, const int *nodes, const double *u, int count)
+{
+    /* Every world state from the mesh as it is, before any node moves. */
+    double *st = malloc((size_t)(9 * count + 1) * sizeof *st);
+    if (!st)
         return -1;
-    double b[4], x[3], v[3], a[3];
-    int loc = ns_mesh_locate(m, u, m->node_tets[n].items[0], 1e-9, b);
-    if (loc < 0)
-        return -1;
-    interp_state(m, loc, b, x, v, a);
-    if (ns_remesh_record_original(s, n, m->u + 3 * n))
-        return -1;
-    set_node(m, n, u, x, v, a);
+    for (int i = 0; i < count; i++) {
+        int n = nodes[i];
+        double b[4];
+        int loc = ns_mesh_node_alive(m, n) && m->node_tets[n].count > 0
+                      ? ns_mesh_locate(m, u + 3 * i, m->node_tets[n].items[0], 1e-9, b)
+                      : -1;
+        if (loc < 0) {
+            free(st);
+            return -1;
+        }
+        interp_state(m, loc, b, st + 9 * i, st + 9 * i + 3, st + 9 * i + 6);
+    }
+    for (int i = 0; i < count; i++)
+        if (ns_remesh_record_original(s, nodes[i], m->u + 3 * nodes[i])) {
+            free(st);
+            return -1;
+        }
+    for (int i = 0; i < count; i++)
+        set_node(m, nodes[i], u + 3 * i, st + 9 * i, st + 9 * i + 3, st + 9 * i + 6);
+    free(st);
     return 0;
 }
 
@@ -959,6 +978,30 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             ns_remesh_snap(m, s, n, now.u);
             node_restore(m, &now);
         }
+    }
+    if (floor_deg > 0.0) {
+        /* The repair moves the free nodes of the region's tets below the floor or above 155
+         * deg, if any (sim/remesh_repair.c). The needle's nodes stay: the chain as it was, the
+         * placed node and the one slid along the needle. */
+        int *pin = malloc((size_t)(tip->chain_len + 2) * sizeof *pin);
+        if (!pin) {
+            free(qbest);
+            snprintf(err, (size_t)err_sz, "remesh: out of memory for the repair");
+            return -1;
+        }
+        int np = 0;
+        for (int i = 0; i < tip->chain_len; i++)
+            pin[np++] = tip->chain[i];
+        pin[np++] = ap.placed;
+        if (ap.moved.n >= 0)
+            pin[np++] = ap.moved.n;
+        int rn2[65];
+        memcpy(rn2, rn, (size_t)nrn * sizeof *rn2);
+        rn2[nrn] = ap.placed;
+        int nq = region_quality(m, rn2, nrn + 1, qcur, REGION_CAP);
+        res->repaired =
+            ns_remesh_repair(m, s, (const int *)(qcur + REGION_CAP), nq, pin, np, floor_deg);
+        free(pin);
     }
     res->kind = c->kind == NS_REMESH_SNAP ? NS_REMESH_SNAP : (NsRemeshKind)c->kind;
     res->undone = c->undo;

@@ -82,6 +82,11 @@ int ns_remesh_undo(NsMesh *m, NsRemeshStack *s);
 /* Moves node n to material point u (world state interpolated as for a split), recording its
  * first original position. Returns 0, or -1 (u outside the mesh, memory). */
 int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3]);
+/* Moves nodes[i] to material point u[3i..3i+3) for every i < count at once: each world state
+ * interpolated in the mesh as it was before any of them moved (so the result does not depend
+ * on their order). Returns 0, or -1 (a point outside the mesh, memory: mesh unchanged; some
+ * originals may be recorded, which is harmless as the nodes have not moved). */
+int ns_remesh_snap_all(NsMesh *m, NsRemeshStack *s, const int *nodes, const double *u, int count);
 /* The original material position of a snapped node (1), or 0 if it was never snapped. */
 int ns_remesh_original(const NsRemeshStack *s, int n, double u[3]);
 /* Records u as node n's original material position (if none is recorded yet): for nodes moved
@@ -137,12 +142,29 @@ typedef struct NsRemeshResult {
     int dropped;        /* u1 left the needle (the chain is now ... u2, tip) */
     int candidates;     /* candidates scored */
     double min_quality; /* worst quality in the region after the operation */
+    int repaired;       /* nodes the repair moved (ns_remesh_repair) */
 } NsRemeshResult;
 
 /* Algorithm 2: remeshes around the needle tip moving to material point u_new. Returns 0, or
  * -1 with a message (u_new outside the tissue, no valid candidate, memory). */
 int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_new[3],
                   NsRemeshResult *res, char *err, int err_sz);
+
+/* Our addition to Algorithm 2 (sim/remesh_repair.c): the repair after the choice. A tet's angle
+ * score is its smallest dihedral angle or, if worse, 180 deg less its largest scaled so that 155
+ * deg scores the floor, clipped at floor_deg. For each tet of tets[0 .. nt) scoring 1.5 deg or
+ * more below the floor, the nodes that may move (not in pinned[0 .. npinned): the needle's; not
+ * fixed; not on the boundary) of the tets below the floor are moved, each towards the material
+ * point that maximizes its tets' worst score, then their worst quality (a compass search), as
+ * far as the score needs (a bisection), all together: Jacobi sweeps, up to three, so that the
+ * result does not depend on the order of tets. A sweep's moves are kept only if
+ * together they raise the worst score of the moved nodes' tets, keep those tets positive at rest
+ * and in the world (each world point interpolated at its new material point) and leave every
+ * tet a stacked split removed positive (so that undoing the split stays valid); else they are
+ * halved towards the start, up to six times. They are snaps (ns_remesh_snap_all: originals
+ * recorded, world states interpolated). No topology changes. Returns the number of node moves. */
+int ns_remesh_repair(NsMesh *m, NsRemeshStack *s, const int *tets, int nt, const int *pinned,
+                     int npinned, double floor_deg);
 
 /* Sorted quality vector comparison: > 0 if a (na values, sorted ascending) is lexicographically
  * better than b. */

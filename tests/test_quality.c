@@ -72,7 +72,8 @@ static int mesh_stats(void)
     return 0;
 }
 
-/* ns_tet_min_dihedral (one acos) gives ns_tet_dihedrals' minimum bit for bit: on random tets,
+/* ns_tet_min_dihedral (one acos) gives ns_tet_dihedrals' minimum bit for bit, and
+ * ns_tet_dihedral_range (two) its minimum and maximum: on random tets,
  * slivers (a vertex near the opposite face), needles, inverted, flat and coincident ones. */
 static int min_dihedral_matches(void)
 {
@@ -104,6 +105,18 @@ static int min_dihedral_matches(void)
         double want2 = ns_tet_dihedrals(p[2], p[0], p[3], p[1], NULL);
         double got2 = ns_tet_min_dihedral(p[2], p[0], p[3], p[1]);
         ENSURE(ns_same_bits(&got2, &want2, 1));
+        /* ns_tet_dihedral_range: the same minimum, and the six angles' maximum (180 for a
+         * degenerate tet, where ns_tet_dihedrals gives zeros). */
+        double ang[6], top = 0.0, hi;
+        ns_tet_dihedrals(p[0], p[1], p[2], p[3], ang);
+        for (int e = 0; e < 6; e++)
+            top = fmax(top, ang[e]);
+        double lo = ns_tet_dihedral_range(p[0], p[1], p[2], p[3], &hi);
+        ENSURE(ns_same_bits(&lo, &want, 1));
+        if (top > 0.0)
+            ENSURE(ns_same_bits(&hi, &top, 1));
+        else
+            ENSURE(hi == 180.0);
         checked++;
     }
     ENSURE(checked == 20000);

@@ -126,6 +126,133 @@ static int structure_ok(const NsMesh *m, const int *chain, int n)
     return q.inverted == 0;
 }
 
+/* The worst dihedral angle of node n's tets [deg]. */
+static double star_min_dihedral(const NsMesh *m, int n)
+{
+    double lo = 180.0;
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++) {
+        const int *tn = m->tet_node + 4 * l->items[i];
+        lo = fmin(lo, ns_tet_min_dihedral(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2],
+                                          m->u + 3 * tn[3]));
+    }
+    return lo;
+}
+
+/* The repair's test block: the 4 x 4 x 4 grid block, an edge split whose removed tets hold the
+ * centre node n (so that undoing it constrains the repair), then n pushed to 5 % of its height
+ * above the face opposite it in one of its tets: a sliver. The original after the split is
+ * copied to orig if given. Deterministic: two calls give the same bits. */
+static int sliver_block(NsMesh *m, NsRemeshStack *s, NsMesh *orig, int *n_out, int *split_out,
+                        double pushed[3])
+{
+    ENSURE(make_block(m, 4) == 0);
+    ns_remesh_stack_init(s);
+    int n = -1;
+    for (int i = 0; i < m->node_slots && n < 0; i++)
+        if (ns_mesh_node_alive(m, i) && fabs(m->u[3 * i] - 2 * H) < 1e-12 &&
+            fabs(m->u[3 * i + 1] - 2 * H) < 1e-12 && fabs(m->u[3 * i + 2] - 2 * H) < 1e-12)
+            n = i;
+    ENSURE(n >= 0);
+    /* A split whose removed tets hold n: the midpoint of an edge opposite n in one of them. */
+    int ab[2], k = 0;
+    const int *t0 = m->tet_node + 4 * m->node_tets[n].items[0];
+    for (int i = 0; i < 4 && k < 2; i++)
+        if (t0[i] != n)
+            ab[k++] = t0[i];
+    double mid[3];
+    for (int i = 0; i < 3; i++)
+        mid[i] = 0.5 * (m->u[3 * ab[0] + i] + m->u[3 * ab[1] + i]);
+    int split = ns_remesh_split(m, s, ab, 2, mid);
+    ENSURE(split >= 0);
+    if (orig)
+        ENSURE(ns_mesh_copy(orig, m) == 0);
+    /* n pushed towards the face opposite it in one of its tets. */
+    const int *t1 = m->tet_node + 4 * m->node_tets[n].items[0];
+    double c[3] = {0, 0, 0};
+    for (int i = 0; i < 4; i++)
+        if (t1[i] != n)
+            for (int j = 0; j < 3; j++)
+                c[j] += m->u[3 * t1[i] + j] / 3.0;
+    for (int j = 0; j < 3; j++)
+        m->u[3 * n + j] = c[j] + 0.05 * (m->u[3 * n + j] - c[j]);
+    memcpy(pushed, m->u + 3 * n, 3 * sizeof *pushed);
+    *n_out = n;
+    *split_out = split;
+    return 0;
+}
+
+/* The repair (ns_remesh_repair): a node pushed to 5 % of its height above a face of its star
+ * makes a sliver; the repair lifts its star's worst dihedral angle to the floor, moves no
+ * pinned or boundary node, gives the same bits whatever the order of the tets it is given,
+ * keeps a stacked split's undo valid, and every node goes back (the pushed one to where it was
+ * pushed) once the needle's records are released. */
+static int repair_lifts_sliver(void)
+{
+    NsMesh m, orig;
+    NsRemeshStack s;
+    int n, split;
+    double pushed[3];
+    ENSURE(sliver_block(&m, &s, &orig, &n, &split, pushed) == 0);
+    double before = star_min_dihedral(&m, n);
+    ENSURE(before < 6.0);
+    NsQualityStats q;
+    ns_mesh_quality(&m, false, &q);
+    ENSURE(q.inverted == 0);
+    int nt = m.node_tets[n].count, *tets = malloc((size_t)nt * sizeof *tets);
+    ENSURE(tets != NULL);
+    memcpy(tets, m.node_tets[n].items, (size_t)nt * sizeof *tets);
+    /* No floor: nothing moves. */
+    ENSURE(ns_remesh_repair(&m, &s, tets, nt, &split, 1, 0.0) == 0);
+    ENSURE(memcmp(m.u + 3 * n, pushed, sizeof pushed) == 0);
+    /* The same block, repaired with its tets given in reverse order, must come out bit for bit
+     * the same: the moves do not depend on the order the nodes are met in (a mirrored region
+     * then gets the mirrored repair, and two runs whose choices differ by a mirror stay
+     * mirrored), where one that moved the nodes one after the other need not. */
+    NsMesh rev;
+    NsRemeshStack s2;
+    int n2, split2;
+    double pushed2[3];
+    ENSURE(sliver_block(&rev, &s2, NULL, &n2, &split2, pushed2) == 0);
+    ENSURE(n2 == n && split2 == split &&
+           memcmp(rev.u, m.u, 3 * (size_t)m.node_slots * sizeof(double)) == 0);
+    int *tets_rev = malloc((size_t)nt * sizeof *tets_rev);
+    ENSURE(tets_rev != NULL);
+    for (int i = 0; i < nt; i++)
+        tets_rev[i] = tets[nt - 1 - i];
+    int moved = ns_remesh_repair(&m, &s, tets, nt, &split, 1, 12.0);
+    ENSURE(moved >= 2); /* more than the pushed node moved: an order could matter */
+    ENSURE(ns_remesh_repair(&rev, &s2, tets_rev, nt, &split, 1, 12.0) == moved);
+    ENSURE(memcmp(rev.u, m.u, 3 * (size_t)m.node_slots * sizeof(double)) == 0);
+    ENSURE(memcmp(rev.x, m.x, 3 * (size_t)m.node_slots * sizeof(double)) == 0);
+    free(tets_rev);
+    ns_remesh_stack_free(&s2);
+    ns_mesh_free(&rev);
+    double after = star_min_dihedral(&m, n);
+    fprintf(stderr, "  repair: %d moves, worst dihedral %.2f -> %.2f deg\n", moved, before, after);
+    ENSURE(after >= 12.0);
+    ENSURE(memcmp(m.u + 3 * split, orig.u + 3 * split, 3 * sizeof(double)) == 0);
+    for (int i = 0; i < m.node_slots; i++)
+        if (ns_mesh_node_alive(&m, i) && ns_remesh_node_on_boundary(&m, i))
+            ENSURE(memcmp(m.u + 3 * i, orig.u + 3 * i, 3 * sizeof(double)) == 0);
+    double u0[3];
+    ENSURE(ns_remesh_original(&s, n, u0) && memcmp(u0, pushed, sizeof u0) == 0);
+    ENSURE(ns_remesh_original(&s, split, u0) == 0); /* made by a split: it has no original */
+    ENSURE(structure_ok(&m, NULL, 0));
+    ENSURE(ns_remesh_undo(&m, &s) == 0);
+    ENSURE(structure_ok(&m, NULL, 0));
+    ns_remesh_release_all(&m, &s);
+    ENSURE(memcmp(m.u + 3 * n, pushed, sizeof pushed) == 0);
+    for (int i = 0; i < orig.node_slots; i++)
+        if (i != n && i != split && ns_mesh_node_alive(&orig, i))
+            ENSURE(memcmp(m.u + 3 * i, orig.u + 3 * i, 3 * sizeof(double)) == 0);
+    free(tets);
+    ns_remesh_stack_free(&s);
+    ns_mesh_free(&m);
+    ns_mesh_free(&orig);
+    return 0;
+}
+
 /* Drives the tip from the middle of the x = 0 face along dir into the block, `steps` steps of
  * `step` m, then back out, with the structural checks after every step. Counts the operations
  * into kinds; the worst region quality into *qmin; the worst and largest dihedral angle of the
@@ -452,6 +579,7 @@ static int skin_entry_and_undo(void)
 NS_TEST_MAIN({"locate_finds_containing_tet", locate_finds_containing_tet},
              {"skin_entry_and_undo", skin_entry_and_undo},
              {"splits_undo_exactly", splits_undo_exactly},
+             {"repair_lifts_sliver", repair_lifts_sliver},
              {"insert_and_retract_restores_topology", insert_and_retract_restores_topology},
              {"cycles_keep_quality_and_topology", cycles_keep_quality_and_topology},
              {"tissue_follows_remeshing", tissue_follows_remeshing})

@@ -134,7 +134,7 @@ need = {
     "stages_ms": ["total", "lcp", "tissue", "needle", "remesh"],
     "stages_mean_ms": ["total", "lcp", "tissue", "needle", "remesh"],
     "lcp_trials": ["min", "mean", "max"], "cg_iterations": ["min", "mean", "max"],
-    "mesh": ["tets", "nodes", "min_dihedral_deg", "max_dihedral_deg"],
+    "mesh": ["tets", "nodes", "min_dihedral_deg", "max_dihedral_deg", "remesh_repaired_nodes"],
     "needle": ["tip_m", "depth_m", "max_axial_force_n"],
     "score": ["total"], "warnings": ["nan", "inverted", "unconverged", "lcp_unresolved"],
 }
