@@ -980,9 +980,10 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
         }
     }
     if (floor_deg > 0.0) {
-        /* The repair moves the free nodes of the region's tets below the floor or above 155
-         * deg, if any (sim/remesh_repair.c). The needle's nodes stay: the chain as it was, the
-         * placed node and the one slid along the needle. */
+        /* The repair moves the free nodes of the region's tets below the floor (angles too
+         * small, or too large), where one is 1.5 deg or more below it (sim/remesh_repair.c). The
+         * needle's nodes stay: the chain as it was, the placed node and the one slid along the
+         * needle. */
         int *pin = malloc((size_t)(tip->chain_len + 2) * sizeof *pin);
         if (!pin) {
             free(qbest);

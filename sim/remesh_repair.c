@@ -1,15 +1,16 @@
 /* The remesher's repair (sim/remesh.h, ns_remesh_repair): our addition to Algorithm 2 (paper
  * §3.4.1). The choice ranks its candidates by their region's worst dihedral angle, but when no
  * candidate reaches the floor it can only take the least bad one, and it does not look at the
- * largest angles. The repair then moves the free nodes of the tets below the floor (or above
- * 155 deg), each to the material point that maximizes its own tets' worst angle score, then
- * their worst quality: optimization-based smoothing of the few nodes that need it, with no
- * change of topology. The nodes move together (Jacobi, not Gauss-Seidel), so that the repair
- * is the same whatever order the nodes are met in: the tutorial's skin entry is mirror-symmetric,
- * and node by node the repair broke the symmetry one way with one solver and the other way with
- * the other (their tips 0.16 mm apart after 30 steps). A sweep's moves must keep the nodes' tets
- * positive in the deformed tissue as well as at rest, and the stacked splits undoable. The moves
- * are snaps: recorded, so that the nodes go back when the needle has left. */
+ * largest angles. The repair then, where a tet is well below the floor (or above 155 deg),
+ * moves the free nodes of the tets below it towards the material points that maximize their own
+ * tets' worst angle score, then their worst quality, no further than the score needs:
+ * optimization-based smoothing of the few nodes that need it, with no change of topology. The nodes
+ * move together (Jacobi, not Gauss-Seidel), so that the repair is the same whatever order the nodes
+ * are met in: the tutorial's skin entry is mirror-symmetric, and node by node the repair broke the
+ * symmetry one way with one solver and the other way with the other (their tips 0.16 mm apart after
+ * 30 steps). A sweep's moves must keep the nodes' tets positive in the deformed tissue as well as
+ * at rest, and the stacked splits undoable. The moves are snaps: recorded, so that the nodes go
+ * back when the needle has left. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -88,7 +89,7 @@ static int undo_stays_valid(const NsMesh *m, const NsRemeshStack *s, int n)
  * their tets positive at rest and in the deformed tissue (each world point interpolated in the
  * mesh as it is: the world map is piecewise linear, so a move that is fine at rest can fold a tet
  * in the world), the stacked splits still undoable, and the worst angle score over their tets
- * raised above d0? The nodes are left where they were; w is scratch for 6k doubles. */
+ * raised above d0? The nodes are left where they were; w is scratch for 9k doubles. */
 static int joint_ok(NsMesh *m, const NsRemeshStack *s, const int *nodes, const double *p, int k,
                     double floor_deg, double d0, double *w)
 {
@@ -244,7 +245,7 @@ int ns_remesh_repair(NsMesh *m, NsRemeshStack *s, const int *tets, int nt, const
      * moves are made together (damped, halving, until jointly acceptable), so the result does
      * not depend on the nodes' order: a mirrored region gives the mirrored repair. */
     int moved = 0, k = 0, nodes[CAP];
-    double p[3 * CAP], start[3 * CAP], w[6 * CAP];
+    double p[3 * CAP], start[3 * CAP], w[9 * CAP];
     for (int sweep = 0; sweep < 3; sweep++) {
         double d0 = floor_deg;
         k = 0;
