@@ -17,6 +17,8 @@
  * blocks of one magnitude (in SI units the tissue's diagonal is ~1e-2 and the constraint
  * entries 1; unscaled, CG stalls). The paper does not say how it scaled; its units differ. */
 #include "coupling_internal.h"
+#include "ns_config.h"
+#include "vec.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -58,30 +60,82 @@ static void apply(const CoupledSystem *S, double kappa, const double *z, double 
     }
 }
 
-static int is_fixed(const CoupledSystem *S, int i)
+/* The vectors of the iteration (scaled), and the step's scalar s (alpha, then beta). */
+typedef struct CgVecs {
+    double *x, *r, *p, *qv, *tmp;
+    const double *sc, *keep;
+    double s;
+    int op; /* the CgPass under way */
+} CgVecs;
+
+typedef enum CgPass {
+    CG_PRODUCT,   /* qv = sc (A sc p) on the free rows, 0 on the fixed; returns p.qv */
+    CG_STEP,      /* x += alpha p, r -= alpha qv; returns r.r */
+    CG_DIRECTION, /* p = r + beta p, and tmp = sc p for the next product */
+} CgPass;
+
+/* One part [i0, i1) of pass v->op; its sum in four partial sums as ns_vec_dot's. */
+static void cg_part(void *ctx, int i0, int i1, double sums[2])
 {
-    if (i < S->nt3)
-        return S->tfixed[i];
-    if (i < S->nt3 + S->nr3)
-        return S->rfixed[i - S->nt3];
-    return 0;
+    const CgVecs *v = ctx;
+    double s4[4] = {0.0, 0.0, 0.0, 0.0}, a = v->s, sum = 0.0;
+    double *restrict x = v->x, *restrict r = v->r, *restrict p = v->p, *restrict qv = v->qv,
+                     *restrict tmp = v->tmp;
+    const double *sc = v->sc, *keep = v->keep;
+    int i = i0;
+    if (v->op == CG_PRODUCT) {
+        for (; i + 4 <= i1; i += 4)
+            for (int l = 0; l < 4; l++) {
+                double q = keep[i + l] != 0.0 ? qv[i + l] * sc[i + l] : 0.0;
+                qv[i + l] = q;
+                s4[l] += p[i + l] * q;
+            }
+        sum = (s4[0] + s4[1]) + (s4[2] + s4[3]);
+        for (; i < i1; i++) {
+            qv[i] = keep[i] != 0.0 ? qv[i] * sc[i] : 0.0;
+            sum += p[i] * qv[i];
+        }
+    } else if (v->op == CG_STEP) {
+        for (; i + 4 <= i1; i += 4)
+            for (int l = 0; l < 4; l++) {
+                x[i + l] += a * p[i + l];
+                double ri = r[i + l] - a * qv[i + l];
+                r[i + l] = ri;
+                s4[l] += ri * ri;
+            }
+        sum = (s4[0] + s4[1]) + (s4[2] + s4[3]);
+        for (; i < i1; i++) {
+            x[i] += a * p[i];
+            r[i] -= a * qv[i];
+            sum += r[i] * r[i];
+        }
+    } else {
+        for (; i < i1; i++) {
+            p[i] = r[i] + a * p[i];
+            tmp[i] = sc[i] * p[i];
+        }
+    }
+    sums[0] = sum;
 }
 
-static double dot(const double *a, const double *b, int n)
+/* Pass op over the two parts of the vectors; returns its sum. */
+static double cg_pass(CgPass op, CgVecs *v, int n, int cut, int nth)
 {
-    double s = 0.0;
-    for (int i = 0; i < n; i++)
-        s += a[i] * b[i];
-    return s;
+    double sums[2];
+    v->op = op;
+    ns_vec_pass(cg_part, v, n, cut, nth, sums);
+    return sums[0];
 }
 
 int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterations)
 {
     int n = S->nt3 + S->nr3 + 3 * S->q;
-    double *buf = malloc((size_t)n * 7 * sizeof *buf);
+    double *buf = malloc((size_t)n * 8 * sizeof *buf);
     if (!buf)
         return -1;
     double *x = buf, *b = x + n, *r = b + n, *p = r + n, *qv = p + n, *sc = qv + n, *tmp = sc + n;
+    double *keep = tmp + n;
+    ns_vec_keep(S->tfixed, S->nt3, S->rfixed, S->nr3, n, keep);
     /* Units: every unknown scaled so that the tissue and needle blocks have a unit diagonal,
      * the constraint forces by sqrt(kappa), kappa the mean diagonal of A_t at the coupled nodes
      * (see the top of the file). */
@@ -129,38 +183,36 @@ int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterati
     } while (0)
     /* r = b - A x on free DOFs; the reference norm is that of b - A x_fixed. */
     for (int i = 0; i < n; i++)
-        p[i] = is_fixed(S, i) ? x[i] : 0.0;
+        p[i] = keep[i] == 0.0 ? x[i] : 0.0;
     APPLY(p, qv);
     double bnorm = 0.0;
     for (int i = 0; i < n; i++)
-        if (!is_fixed(S, i))
+        if (keep[i] != 0.0)
             bnorm += (b[i] - qv[i]) * (b[i] - qv[i]);
     bnorm = sqrt(bnorm);
     APPLY(x, qv);
     for (int i = 0; i < n; i++)
-        r[i] = is_fixed(S, i) ? 0.0 : b[i] - qv[i];
-    double rr = dot(r, r, n);
+        r[i] = keep[i] == 0.0 ? 0.0 : b[i] - qv[i];
+    double rr = ns_vec_dot(r, r, n);
     int it = 0;
+    /* The iteration's vector work in three passes (below), each over the two parts of the
+     * vector that the tissue product gives its two threads, run at once on them. */
+    CgVecs v = {x, r, p, qv, tmp, sc, keep, 0.0, CG_PRODUCT};
+    int cut = ns_vec_cut(S->nt3, n), nth = S->threads > 1 && cut > 0 ? 2 : 1;
     if (bnorm > 0.0) {
         memcpy(p, r, (size_t)n * sizeof *p);
+        for (int i = 0; i < n; i++)
+            tmp[i] = sc[i] * p[i];
         while (sqrt(rr) > tol * bnorm && it < max_iter) {
-            APPLY(p, qv);
-            for (int i = 0; i < n; i++)
-                if (is_fixed(S, i))
-                    qv[i] = 0.0;
-            double pq = dot(p, qv, n);
+            apply(S, 1.0, tmp, qv);
+            double pq = cg_pass(CG_PRODUCT, &v, n, cut, nth);
             if (pq == 0.0 || !isfinite(pq))
                 break; /* breakdown of CG on the indefinite system */
-            double alpha = rr / pq;
-            for (int i = 0; i < n; i++) {
-                x[i] += alpha * p[i];
-                r[i] -= alpha * qv[i];
-            }
-            double rr2 = dot(r, r, n);
-            double beta = rr2 / rr;
+            v.s = rr / pq;
+            double rr2 = cg_pass(CG_STEP, &v, n, cut, nth);
+            v.s = rr2 / rr;
             rr = rr2;
-            for (int i = 0; i < n; i++)
-                p[i] = r[i] + beta * p[i];
+            cg_pass(CG_DIRECTION, &v, n, cut, nth);
             it++;
         }
     }

@@ -27,6 +27,7 @@
  * which configurations are tried, never the tolerance of the accepted solution. */
 #include "coupling_internal.h"
 #include "ns_config.h"
+#include "vec.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -55,7 +56,7 @@ struct CoupledSchur {
     int *act;
     int na;
     int act_cap;
-    double *vec; /* 5 vectors of nt3 + nr3 */
+    double *vec; /* 6 vectors of nt3 + nr3 */
     size_t vec_cap;
     /* add_response's terms: up to 6q cached columns and their scales */
     const double **term_col;
@@ -394,12 +395,12 @@ static int ensure_buf(CoupledSchur *w, const CoupledSystem *S)
         w->term_s = ts;
         w->term_cap = cap;
     }
-    if (5 * n > w->vec_cap) {
-        double *v = realloc(w->vec, 5 * n * sizeof *v);
+    if (6 * n > w->vec_cap) {
+        double *v = realloc(w->vec, 6 * n * sizeof *v);
         if (!v)
             return -1;
         w->vec = v;
-        w->vec_cap = 5 * n;
+        w->vec_cap = 6 * n;
     }
     return 0;
 }
@@ -654,20 +655,18 @@ static void mask_fixed(const CoupledSystem *S, double *v)
             v[S->nt3 + i] = 0.0;
 }
 
-/* out = H x on the free rows (fixed rows 0). */
-static void hmul(const CoupledSystem *S, const double *x, double *out)
+/* out = H x, the fixed rows included (hmul zeroes them). */
+static void hmul_all(const CoupledSystem *S, const double *x, double *out)
 {
     ns_bsm_mul_threads(S->At, x, out, S->threads);
     ns_banded_mul(S->Ar, x + S->nt3, out + S->nt3);
-    mask_fixed(S, out);
 }
 
-static double sdot(const double *a, const double *b, int n)
+/* out = H x on the free rows (fixed rows 0). */
+static void hmul(const CoupledSystem *S, const double *x, double *out)
 {
-    double s = 0.0;
-    for (int i = 0; i < n; i++)
-        s += a[i] * b[i];
-    return s;
+    hmul_all(S, x, out);
+    mask_fixed(S, out);
 }
 
 /* Multipliers lam (3q, 0 on inactive components) with C_aa lam_a = rhs_a. */
@@ -1014,11 +1013,78 @@ static void forces_from(const CoupledSystem *S, const double *acc)
                 is_active(S->st[k], col) ? -acc[3 * k + col] : coupled_known_force(S, k, S->st[k]);
 }
 
+/* The PCG iteration's vectors (tissue then needle; the iterate is S->at, S->ar), the step's
+ * scalar s (alpha, then beta) and the pass under way. */
+typedef struct PcgVecs {
+    double *xt, *xn, *r, *g, *p, *hp;
+    const double *sc, *keep;
+    int nt3, op;
+    double s;
+} PcgVecs;
+
+enum {
+    PCG_PRODUCT,   /* hp's fixed rows zeroed; sums p.hp */
+    PCG_STEP,      /* x += alpha p, r += alpha hp */
+    PCG_RESIDUAL,  /* r's fixed rows zeroed; sums r.g and the scaled |r|^2 */
+    PCG_DIRECTION, /* p = -g + beta p */
+};
+
+/* One part [i0, i1) of pass v->op, each sum in four partial sums as ns_vec_dot's. */
+static void pcg_part(void *ctx, int i0, int i1, double sums[2])
+{
+    const PcgVecs *v = ctx;
+    double *restrict r = v->r, *restrict p = v->p, *restrict hp = v->hp;
+    const double *g = v->g, *sc = v->sc, *keep = v->keep, a = v->s;
+    double s4[4] = {0.0, 0.0, 0.0, 0.0}, t4[4] = {0.0, 0.0, 0.0, 0.0};
+    int i = i0;
+    sums[0] = sums[1] = 0.0;
+    if (v->op == PCG_PRODUCT) {
+        for (; i + 4 <= i1; i += 4)
+            for (int l = 0; l < 4; l++) {
+                double h = keep[i + l] != 0.0 ? hp[i + l] : 0.0;
+                hp[i + l] = h;
+                s4[l] += p[i + l] * h;
+            }
+        sums[0] = (s4[0] + s4[1]) + (s4[2] + s4[3]);
+        for (; i < i1; i++) {
+            hp[i] = keep[i] != 0.0 ? hp[i] : 0.0;
+            sums[0] += p[i] * hp[i];
+        }
+    } else if (v->op == PCG_STEP) {
+        int mid = i1 < v->nt3 ? i1 : v->nt3 > i0 ? v->nt3 : i0;
+        for (; i < mid; i++)
+            v->xt[i] += a * p[i];
+        for (; i < i1; i++)
+            v->xn[i - v->nt3] += a * p[i];
+        for (i = i0; i < i1; i++)
+            r[i] += a * hp[i];
+    } else if (v->op == PCG_RESIDUAL) {
+        for (; i + 4 <= i1; i += 4)
+            for (int l = 0; l < 4; l++) {
+                double ri = keep[i + l] != 0.0 ? r[i + l] : 0.0, si = sc[i + l] * ri;
+                r[i + l] = ri;
+                s4[l] += ri * g[i + l];
+                t4[l] += si * si;
+            }
+        sums[0] = (s4[0] + s4[1]) + (s4[2] + s4[3]);
+        sums[1] = (t4[0] + t4[1]) + (t4[2] + t4[3]);
+        for (; i < i1; i++) {
+            double ri = keep[i] != 0.0 ? r[i] : 0.0, si = sc[i] * ri;
+            r[i] = ri;
+            sums[0] += ri * g[i];
+            sums[1] += si * si;
+        }
+    } else {
+        for (; i < i1; i++)
+            p[i] = -g[i] + a * p[i];
+    }
+}
+
 static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol, int max_iter,
                 int *iterations, uint8_t *next, int *violations)
 {
     int nt3 = S->nt3, n = S->nt3 + S->nr3, q3 = 3 * S->q;
-    double *b = w->vec, *r = b + n, *g = r + n, *p = g + n, *hp = p + n;
+    double *b = w->vec, *r = b + n, *g = r + n, *p = g + n, *hp = p + n, *keep = hp + n;
     double *lam = w->small, *acc = lam + q3, *h = acc + q3, *tmp = h + q3;
     double *xt = S->at, *xn = S->ar;
     /* x as one vector: tissue then needle (S->at and S->ar are separate arrays). */
@@ -1027,6 +1093,7 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
         memcpy(out, xt, (size_t)nt3 * sizeof *out);                                                \
         memcpy(out + nt3, xn, (size_t)S->nr3 * sizeof *out);                                       \
     } while (0)
+    ns_vec_keep(S->tfixed, nt3, S->rfixed, S->nr3, n, keep);
     /* The right-hand side with the known dynamic friction. */
     memcpy(b, S->bt, (size_t)nt3 * sizeof *b);
     memcpy(b + nt3, S->br, (size_t)S->nr3 * sizeof *b);
@@ -1079,7 +1146,7 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
     mask_fixed(S, r);
     for (int j = 0; j < q3; j++)
         acc[j] += lam[j];
-    double rg = sdot(r, g, n);
+    double rg = ns_vec_dot(r, g, n);
     for (int i = 0; i < n; i++)
         p[i] = -g[i];
     int it = 0, cap = max_iter < STALE_MAX_ITER ? max_iter : STALE_MAX_ITER;
@@ -1089,6 +1156,10 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
     int checked = next == NULL;
     if (violations)
         *violations = 0;
+    /* The iteration's vector work in four passes, each over the two parts of the vectors that
+     * the tissue product gives its two threads, run at once on them (vec.h). */
+    PcgVecs v = {xt, xn, r, g, p, hp, w->sc, keep, nt3, PCG_PRODUCT, 0.0};
+    int cut = ns_vec_cut(nt3, n), nth = S->threads > 1 && cut > 0 ? 2 : 1;
     while (bnorm > 0.0 && it < cap) {
         if (!checked && sqrt(rn2) <= tol_check * bnorm) {
             checked = 1;
@@ -1098,38 +1169,30 @@ static int ppcg(CoupledSchur *w, CoupledSystem *S, double tol_check, double tol,
         }
         if (sqrt(rn2) <= tol * bnorm)
             break;
-        hmul(S, p, hp);
-        double php = sdot(p, hp, n);
+        hmul_all(S, p, hp);
+        double sums[2];
+        v.op = PCG_PRODUCT;
+        ns_vec_pass(pcg_part, &v, n, cut, nth, sums);
+        double php = sums[0];
         if (!(php > 0.0))
             break;
-        double alpha = rg / php;
-        for (int i = 0; i < nt3; i++) {
-            xt[i] += alpha * p[i];
-            r[i] += alpha * hp[i];
-        }
-        for (int i = nt3; i < n; i++) {
-            xn[i - nt3] += alpha * p[i];
-            r[i] += alpha * hp[i];
-        }
+        v.s = rg / php;
+        v.op = PCG_STEP;
+        ns_vec_pass(pcg_part, &v, n, cut, nth, sums);
         if (project(w, S, r, g, lam, h, tmp))
             return -1;
         add_bt(S, lam, -1.0, r, r + nt3);
         for (int j = 0; j < q3; j++)
             acc[j] += lam[j];
-        /* The fixed entries of r zeroed (mask_fixed), r.g and the scaled |r|^2 in one pass,
-         * each sum in index order as apart. */
-        double rg2 = 0.0;
-        rn2 = 0.0;
-        for (int i = 0; i < n; i++) {
-            if (i < nt3 ? S->tfixed[i] : S->rfixed[i - nt3])
-                r[i] = 0.0;
-            rg2 += r[i] * g[i];
-            rn2 += (w->sc[i] * r[i]) * (w->sc[i] * r[i]);
-        }
-        double beta = rg2 / rg;
+        /* The fixed entries of r zeroed (mask_fixed), r.g and the scaled |r|^2 in one pass. */
+        v.op = PCG_RESIDUAL;
+        ns_vec_pass(pcg_part, &v, n, cut, nth, sums);
+        double rg2 = sums[0];
+        rn2 = sums[1];
+        v.s = rg2 / rg;
         rg = rg2;
-        for (int i = 0; i < n; i++)
-            p[i] = -g[i] + beta * p[i];
+        v.op = PCG_DIRECTION;
+        ns_vec_pass(pcg_part, &v, n, cut, nth, sums);
         it++;
     }
 #undef X_GET

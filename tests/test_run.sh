@@ -160,6 +160,15 @@ if [ $? = 0 ]; then pass "report keys present and finite, target hit ($(cat "$TM
 h1=$(grep '"state_hash"' "$TMP/t1/report.json")
 h2=$(grep '"state_hash"' "$TMP/t2/report.json" 2>/dev/null)
 if [ -n "$h1" ] && [ "$h1" = "$h2" ]; then pass "same state hash with 1 and 2 threads"; else fail "state hash, 1 vs 2 threads" "$h1 / $h2"; fi
+# The paper's solver too: its vector passes split the tutorial's 1,979 nodes over two threads
+# (sim/vec.h), its sums in a fixed order, so the bits cannot depend on the thread count.
+for th in 1 2; do
+    "$BIN" run "$TUT" -o "$TMP/p$th" --steps 30 --threads $th --solver paper --no-render --quiet \
+        >/dev/null 2>"$TMP/errp$th"
+done
+p1=$(grep '"state_hash"' "$TMP/p1/report.json" 2>/dev/null)
+p2=$(grep '"state_hash"' "$TMP/p2/report.json" 2>/dev/null)
+if [ -n "$p1" ] && [ "$p1" = "$p2" ]; then pass "paper solver: same state hash with 1 and 2 threads"; else fail "paper solver, 1 vs 2 threads" "$p1 / $p2 $(head -1 "$TMP/errp1")"; fi
 
 # The recorded controls replayed: the same state and score.
 same_run() { # name, report A, report B
