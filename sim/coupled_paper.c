@@ -60,7 +60,7 @@ static void apply(const CoupledSystem *S, double kappa, const double *z, double 
     }
 }
 
-/* The vectors of the iteration (scaled), and the step's scalar s (alpha, then beta). */
+/* The vectors of the CG iteration (§3.6.2; scaled), and the step's scalar s (alpha, then beta). */
 typedef struct CgVecs {
     double *x, *r, *p, *qv, *tmp;
     const double *sc, *keep;

@@ -1013,8 +1013,9 @@ static void forces_from(const CoupledSystem *S, const double *acc)
                 is_active(S->st[k], col) ? -acc[3 * k + col] : coupled_known_force(S, k, S->st[k]);
 }
 
-/* The PCG iteration's vectors (tissue then needle; the iterate is S->at, S->ar), the step's
- * scalar s (alpha, then beta) and the pass under way. */
+/* The projected PCG iteration's vectors (docs/coupling.md, "Solver: ours", step 3; tissue then
+ * needle, the iterate in S->at and S->ar), the step's scalar s (alpha, then beta) and the pass
+ * under way. */
 typedef struct PcgVecs {
     double *xt, *xn, *r, *g, *p, *hp;
     const double *sc, *keep;

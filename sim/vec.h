@@ -34,8 +34,9 @@ static inline void ns_vec_keep(const unsigned char *tfixed, int nt3, const unsig
 
 /* Where a tissue-then-rest vector of n entries (the tissue's nt3 first) is cut in two for two
  * threads: at the middle node, where ns_bsm_mul_threads's static split of the tissue matrix's
- * rows (one per node) puts it (the first thread takes the first half, rounded up), so that each
- * thread's vector work is mostly on entries its product wrote; 0 (no cut) below
+ * rows (one per node) puts it on two threads (the first takes the first half, rounded up), so
+ * that each thread's vector work is mostly on entries its product wrote (with more threads the
+ * product splits finer; only the speed depends on that); 0 (no cut) below
  * NS_BSM_PARALLEL_MIN_ROWS nodes, where the product runs on one thread. The cut depends on the
  * sizes alone, never on the thread count. */
 static inline int ns_vec_cut(int nt3, int n)
