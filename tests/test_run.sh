@@ -460,7 +460,12 @@ for s in ["schur", "paper"]:
     assert r[s]["steps"] == 30, r[s]["steps"]
 assert r["agree"] is True and r["max_tip_difference_m"] <= 0.05e-3, r["max_tip_difference_m"]
 assert r["speedup"] > 0
-print("tips within %.2g mm, speed-up %.2f" % (1e3 * r["max_tip_difference_m"], r["speedup"]))
+# the whole run's ratio: the two runs' mean steps, as each object reports them
+want = r["paper"]["step_ms"]["mean"] / r["schur"]["step_ms"]["mean"]
+assert abs(r["speedup_mean"] - want) <= 1e-9 * want, (r["speedup_mean"], want)
+want = r["paper"]["step_ms"]["median"] / r["schur"]["step_ms"]["median"]
+assert abs(r["speedup"] - want) <= 1e-9 * want, (r["speedup"], want)
+print("tips within %.2g mm, speed-up %.2f, whole run %.2f" % (1e3 * r["max_tip_difference_m"], r["speedup"], r["speedup_mean"]))
 PY
     pass "bench --compare paper --json: both solvers, tips agree ($(cat "$TMP/py_c"))"
 else
@@ -475,7 +480,7 @@ if [ $rc = 0 ] && python3 - "$TMP/rep.json" <<'PY' >"$TMP/py_rep" 2>&1; then
 import json, sys
 r = json.load(open(sys.argv[1]))["repeat"]
 assert r["runs"] == 2, r
-for k in ["step_ms", "compared_step_ms", "speedup"]:
+for k in ["step_ms", "compared_step_ms", "speedup", "speedup_mean"]:
     assert 0 < r[k]["min"] <= r[k]["median"] <= r[k]["max"], (k, r[k])
 print("speed-up %.2f [%.2f, %.2f]" % (r["speedup"]["median"], r["speedup"]["min"], r["speedup"]["max"]))
 PY
