@@ -128,7 +128,8 @@ import json, math, sys
 r = json.load(open(sys.argv[1]))
 need = {
     "": ["schema", "scenario", "version", "steps", "sim_time_s", "wall_time_s", "step_ms",
-         "stages_ms", "lcp_trials", "cg_iterations", "friction_consistent_fraction", "mesh",
+         "stages_ms", "lcp_trials", "cg_iterations", "factorizations",
+         "friction_consistent_fraction", "mesh",
          "needle", "targets", "seeds", "obstacles", "score", "warnings", "state_hash"],
     "step_ms": ["median", "mean", "p95", "max"],
     "stages_ms": ["total", "lcp", "tissue", "needle", "remesh"],
@@ -149,6 +150,8 @@ assert len(r["targets"]) == 1 and r["targets"][0]["hit"] is True, r["targets"]
 for k in ["name", "error_mm", "tolerance_mm", "hit"]:
     assert k in r["targets"][0], "targets[0]." + k
 assert r["warnings"]["nan"] == 0 and r["warnings"]["inverted"] == 0
+# our solver factors the tissue at least once (the first step), and never more than once a step
+assert 1 <= r["factorizations"] <= r["steps"], (r["factorizations"], r["steps"])
 rows = open(sys.argv[2]).read().splitlines()
 assert rows[0].startswith("t_s,tip_x_m"), rows[0]
 assert len(rows) == r["steps"] + 1, (len(rows), r["steps"])
@@ -458,6 +461,9 @@ for s in ["schur", "paper"]:
     for k in ["step_ms", "stages_ms", "lcp_trials", "cg_iterations", "steps"]:
         assert k in r[s], "missing %s.%s" % (s, k)
     assert r[s]["steps"] == 30, r[s]["steps"]
+# the paper's CG needs no factor; ours makes at least the first one
+assert r["paper"]["factorizations"] == 0 and r["schur"]["factorizations"] >= 1, \
+    (r["paper"]["factorizations"], r["schur"]["factorizations"])
 assert r["agree"] is True and r["max_tip_difference_m"] <= 0.05e-3, r["max_tip_difference_m"]
 assert r["speedup"] > 0
 # the whole run's ratio: the two runs' mean steps, as each object reports them
