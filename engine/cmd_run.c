@@ -2368,12 +2368,11 @@ int ns_cmd_bench(int argc, char **argv)
         tip_difference(&runs[0], &runs[1], &compared);
     bool agree = all_agree;
     double diff = worst;                              /* over every repeat */
-    double rmed[3] = {0}, rlo[3] = {0}, rhi[3] = {0}; /* ours, compared, ratio */
+    double rmed[4] = {0}, rlo[4] = {0}, rhi[4] = {0}; /* ours, compared, ratio, ratio of means */
     for (int k = 0; k < nruns; k++)
         median_range(meds[k], done, &rmed[k], &rlo[k], &rhi[k]);
     median_range(ratios, done, &rmed[2], &rlo[2], &rhi[2]);
-    double mmed = 0.0, mlo = 0.0, mhi = 0.0; /* the whole runs' ratio over the repeats */
-    median_range(ratios_mean, done, &mmed, &mlo, &mhi);
+    median_range(ratios_mean, done, &rmed[3], &rlo[3], &rhi[3]);
     double speedup = nruns == 2 ? series_quantile(&runs[1].step_ms, 0.5) /
                                       fmax(series_quantile(&runs[0].step_ms, 0.5), 1e-12)
                                 : 1.0;
@@ -2413,8 +2412,9 @@ int ns_cmd_bench(int argc, char **argv)
             ns_json_begin_object(&j);
             ns_json_key(&j, "runs");
             ns_json_int(&j, done);
-            static const char *const what[3] = {"step_ms", "compared_step_ms", "speedup"};
-            for (int k = 0; k < 3; k++) {
+            static const char *const what[4] = {"step_ms", "compared_step_ms", "speedup",
+                                                "speedup_mean"};
+            for (int k = 0; k < 4; k++) {
                 if (k > 0 && nruns == 1)
                     break;
                 ns_json_key(&j, what[k]);
@@ -2425,17 +2425,6 @@ int ns_cmd_bench(int argc, char **argv)
                 ns_json_number(&j, rlo[k]);
                 ns_json_key(&j, "max");
                 ns_json_number(&j, rhi[k]);
-                ns_json_end_object(&j);
-            }
-            if (nruns == 2) {
-                ns_json_key(&j, "speedup_mean");
-                ns_json_begin_object(&j);
-                ns_json_key(&j, "median");
-                ns_json_number(&j, mmed);
-                ns_json_key(&j, "min");
-                ns_json_number(&j, mlo);
-                ns_json_key(&j, "max");
-                ns_json_number(&j, mhi);
                 ns_json_end_object(&j);
             }
             ns_json_end_object(&j);
@@ -2467,7 +2456,7 @@ int ns_cmd_bench(int argc, char **argv)
                        rlo[k], rhi[k]);
             if (nruns == 2)
                 printf("  speed-up %.2fx [%.2f, %.2f]; whole run (mean steps) %.2fx [%.2f, %.2f]\n",
-                       rmed[2], rlo[2], rhi[2], mmed, mlo, mhi);
+                       rmed[2], rlo[2], rhi[2], rmed[3], rlo[3], rhi[3]);
         }
     }
     if (!agree)
