@@ -2369,17 +2369,12 @@ int ns_cmd_bench(int argc, char **argv)
     bool agree = all_agree;
     double diff = worst;                              /* over every repeat */
     double rmed[4] = {0}, rlo[4] = {0}, rhi[4] = {0}; /* ours, compared, ratio, ratio of means */
+    /* the last repeat's ratios, read before median_range sorts the arrays in place */
+    double speedup = ratios[done - 1], speedup_mean = ratios_mean[done - 1];
     for (int k = 0; k < nruns; k++)
         median_range(meds[k], done, &rmed[k], &rlo[k], &rhi[k]);
     median_range(ratios, done, &rmed[2], &rlo[2], &rhi[2]);
     median_range(ratios_mean, done, &rmed[3], &rlo[3], &rhi[3]);
-    double speedup = nruns == 2 ? series_quantile(&runs[1].step_ms, 0.5) /
-                                      fmax(series_quantile(&runs[0].step_ms, 0.5), 1e-12)
-                                : 1.0;
-    /* the last repeat's, as speedup (median_range sorted ratios_mean) */
-    double speedup_mean =
-        nruns == 2 ? series_mean(&runs[1].step_ms) / fmax(series_mean(&runs[0].step_ms), 1e-12)
-                   : 1.0;
     if (json) {
         NsJson j;
         ns_json_init(&j, stdout, 1);
