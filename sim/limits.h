@@ -1,0 +1,75 @@
+/* Every limit needlesim puts on untrusted input, in one place, with its unit and its reason
+ * (STYLE.md: the SQLite model: a named limit, checked before the work or the allocation it
+ * bounds). Scenarios, meshes, trainee logs and live messages come from other people; each of
+ * these is checked where the value is used, whatever a constructor checked earlier.
+ * docs/reliability.md lists them for users. */
+#ifndef NS_LIMITS_H
+#define NS_LIMITS_H
+
+/* ---- controls (scripts, trainee logs and live messages alike) -------------------------------
+ * Physical bounds, well above any clinical or robotic procedure, so that the work a step does
+ * (the reparameterization's splits, the remesher's pieces) is bounded by construction. */
+
+/* Insertion or retraction speed |v_insert| [m/s]. Hand insertion runs 1-10 mm/s, robotic
+ * insertion up to ~0.1 m/s; the stability map (docs/stability.csv) goes to 0.2 m/s. */
+#define NS_LIMIT_INSERT_SPEED 0.5
+/* Base twist rate |twist_rate| [rad/s]: 10 turns a second (duty-cycled spinning, Engh et al.
+ * 2006 and Majewicz et al. 2014, spins at 1-10 turns a second). */
+#define NS_LIMIT_TWIST_RATE 63.0
+/* Sleeve (base) velocity, each component [m/s]: as the insertion speed. */
+#define NS_LIMIT_BASE_SPEED 0.5
+/* One twist angle (act.twist{angle}, a live {"twist": rad}) [rad]: 100 turns. */
+#define NS_LIMIT_TWIST_ANGLE 628.0
+
+/* ---- time --------------------------------------------------------------------------------- */
+
+/* The time step dt [s]: above this the coupled step's Newmark update is far outside what any
+ * validation case covers; below the minimum a run of a second is millions of steps. */
+#define NS_LIMIT_DT_MAX 0.1
+#define NS_LIMIT_DT_MIN 1e-6
+/* Simulated time a run may last when its scenario gives no duration [s]: a script that never
+ * ends (act.wait in a loop) stops here and the report says it had not finished. */
+#define NS_LIMIT_DEFAULT_SIM_TIME 120.0
+/* The longest duration a scenario may ask for [s] (one hour of procedure). */
+#define NS_LIMIT_SIM_TIME_MAX 3600.0
+/* Steps in one run, whatever dt and duration say. */
+#define NS_LIMIT_STEPS 2000000L
+
+/* ---- scenario scripts --------------------------------------------------------------------- */
+
+/* Lua VM instructions for loading a scenario (the file, its modules, its shape functions as
+ * the mesher calls them), all together. */
+#define NS_LIMIT_LOAD_INSTRUCTIONS 2000000000LL
+/* Lua VM instructions for the whole of a run's script and on_tick calls, all together. */
+#define NS_LIMIT_RUN_INSTRUCTIONS 20000000000LL
+/* Memory one scenario's Lua state may hold [bytes]. */
+#define NS_LIMIT_LUA_MEMORY ((size_t)1 << 30)
+/* Wall-clock time loading a scenario may take, meshing included [s]. */
+#define NS_LIMIT_LOAD_SECONDS 60.0
+/* The string library's pattern functions (find, match, gmatch, gsub): longest subject and
+ * pattern [bytes], and the instructions each call is charged per subject byte scanned per
+ * pattern item (backtracking is C code the instruction hook never sees). */
+#define NS_LIMIT_PATTERN_SUBJECT 65536
+#define NS_LIMIT_PATTERN_LENGTH 256
+
+/* ---- files -------------------------------------------------------------------------------- */
+
+/* A mesh file (Gmsh .msh, VTK .vtu/.vtk) [bytes]: ~10 million tets in ASCII. */
+#define NS_LIMIT_MESH_FILE_BYTES ((long long)1 << 30)
+/* A trainee log [bytes]: an hour at 10 kHz. */
+#define NS_LIMIT_LOG_FILE_BYTES ((long long)256 << 20)
+/* A scenario file or module [bytes]. */
+#define NS_LIMIT_SCRIPT_FILE_BYTES ((long long)16 << 20)
+
+/* ---- meshes ------------------------------------------------------------------------------- */
+
+/* Memory the mesher may plan to use [bytes], estimated from the lattice before it allocates;
+ * past it the message states the coarsest resolution that would fit. */
+#define NS_LIMIT_MESHER_BYTES ((long long)4 << 30)
+
+/* ---- names -------------------------------------------------------------------------------- */
+
+/* Names that end up in CSV headers and JSON (targets, markers, obstacles, regions) [bytes]. */
+#define NS_LIMIT_NAME_LENGTH 64
+
+#endif
