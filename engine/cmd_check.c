@@ -29,12 +29,12 @@ static bool has_suffix(const char *s, const char *suffix)
     return n >= k && strcasecmp(s + n - k, suffix) == 0;
 }
 
+/* A bad command line: one line, the usage on --help (the one-line contract for bad input). */
 static int usage_error(const char *fmt, const char *arg)
 {
-    fputs("needlesim: check: ", stderr);
+    fputs("needlesim check: ", stderr);
     fprintf(stderr, fmt, arg);
-    fputc('\n', stderr);
-    fputs(check_usage, stderr);
+    fputs(" (needlesim check --help)\n", stderr);
     return 2;
 }
 

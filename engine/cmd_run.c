@@ -28,8 +28,11 @@
 #include "control_log.h"
 #include "coupling.h"
 #include "err.h"
+#include "cleanup.h"
 #include "json.h"
+#include "out_files.h"
 #include "needle_path.h"
+#include "ns_limits.h"
 #include "ns_config.h"
 #include "quality.h"
 #include "remesh.h"
@@ -59,12 +62,12 @@ typedef struct RunOpts {
     int width, height, frame_every; /* frame_every 0: the scenario's camera decides */
 } RunOpts;
 
+/* A bad command line: one line, the usage on --help (the one-line contract for bad input). */
 static int usage_error(const char *fmt, const char *arg)
 {
     fputs("needlesim run: ", stderr);
     fprintf(stderr, fmt, arg);
-    fputc('\n', stderr);
-    fputs(run_usage, stderr);
+    fputs(" (needlesim run --help)\n", stderr);
     return 2;
 }
 
@@ -173,6 +176,7 @@ typedef struct Run {
     FILE *rec;
     NsControlLog replay;
     bool made_dir, progress_shown, script_finished;
+    bool time_capped;    /* stopped at NS_LIMIT_DEFAULT_SIM_TIME with the script still running */
     bool stop_when_done; /* bench: the script's end ends the run even before --steps */
     FILE *traj;
     /* pictures */
@@ -472,6 +476,13 @@ static int start_body(lua_State *L)
     set_num(L, lua_gettop(L), "v_insert", 0.0);
     set_num(L, lua_gettop(L), "twist_rate", 0.0);
     lua_rawset(L, -3);
+    lua_pushstring(L, "limits"); /* the controls' bounds (sim/ns_limits.h) */
+    lua_createtable(L, 0, 4);
+    set_num(L, lua_gettop(L), "insert_speed", NS_LIMIT_INSERT_SPEED);
+    set_num(L, lua_gettop(L), "twist_rate", NS_LIMIT_TWIST_RATE);
+    set_num(L, lua_gettop(L), "base_speed", NS_LIMIT_BASE_SPEED);
+    set_num(L, lua_gettop(L), "twist_angle", NS_LIMIT_TWIST_ANGLE);
+    lua_rawset(L, -3);
     lua_pushvalue(L, -1);
     r->sim_ref = luaL_ref(L, LUA_REGISTRYINDEX);
     int sim = lua_gettop(L);
@@ -500,6 +511,8 @@ static int script_start(Run *r, char *err, int err_sz)
 {
     lua_State *L = ns_lua_state(r->sc.lua);
     TickIO io = {.r = r};
+    /* One budget for the whole of the run's script and on_tick calls (sim/ns_limits.h). */
+    ns_lua_begin_phase(r->sc.lua, "the run's script", NS_LIMIT_RUN_INSTRUCTIONS, 0.0);
     lua_pushcfunction(L, start_body);
     lua_pushlightuserdata(L, &io);
     return ns_lua_call(r->sc.lua, 1, 0, err, err_sz);
@@ -623,6 +636,13 @@ static int tick_body(lua_State *L)
             return luaL_error(L, "%s: sim.control.%s must be a finite number (got %s)", r->sc.path,
                               keys[k],
                               ty == LUA_TNUMBER ? "a non-finite number" : luaL_typename(L, -1));
+        double lim = k == 0 ? NS_LIMIT_INSERT_SPEED : NS_LIMIT_TWIST_RATE;
+        if (fabs(v) > lim) {
+            char buf[160]; /* (lua_pushfstring knows no %g) */
+            snprintf(buf, sizeof buf, "sim.control.%s %g is beyond its limit of %g %s", keys[k], v,
+                     lim, k == 0 ? "m/s" : "rad/s");
+            return luaL_error(L, "%s: %s", r->sc.path, buf);
+        }
         *dst[k] = v;
         lua_pop(L, 1);
     }
@@ -634,7 +654,7 @@ static int tick_body(lua_State *L)
         for (int k = 0; k < 3; k++) {
             int ty = lua_rawgeti(L, bi, k + 1);
             vb[k] = lua_tonumber(L, -1);
-            if (ty != LUA_TNUMBER || !isfinite(vb[k]))
+            if (ty != LUA_TNUMBER || !isfinite(vb[k]) || fabs(vb[k]) > NS_LIMIT_BASE_SPEED)
                 bt = LUA_TNONE;
             lua_pop(L, 1);
         }
@@ -642,8 +662,8 @@ static int tick_body(lua_State *L)
     if (bt != LUA_TTABLE && bt != LUA_TNIL)
         return luaL_error(L,
                           "%s: sim.control.base_velocity must be {vx, vy, vz}: 3 finite "
-                          "numbers [m/s] or nil",
-                          r->sc.path);
+                          "numbers within +-%d mm/s, or nil",
+                          r->sc.path, (int)(1e3 * NS_LIMIT_BASE_SPEED));
     memcpy(io->ctl.v_base, vb, sizeof vb);
     lua_pop(L, 1);
     /* act.next_needle{} leaves the new entry, checked by the action: {point, direction,
@@ -657,10 +677,17 @@ static int tick_body(lua_State *L)
             int ty = get_raw(L, ni, keys3[k]);
             if (k == 2)
                 e->has_bevel_toward = ty == LUA_TTABLE;
+            bool ok = true;
             for (int i = 0; ty == LUA_TTABLE && i < 3; i++) {
-                lua_rawgeti(L, -1 - i, i + 1);
+                ok &= lua_rawgeti(L, -1 - i, i + 1) == LUA_TNUMBER;
                 dst3[k][i] = lua_tonumber(L, -1);
+                ok &= isfinite(dst3[k][i]) != 0;
             }
+            if (ty == LUA_TTABLE && !ok)
+                return luaL_error(L,
+                                  "%s: sim.control.next_needle.%s must be {x, y, z}: three "
+                                  "finite numbers",
+                                  r->sc.path, keys3[k]);
             if (ty == LUA_TTABLE)
                 lua_pop(L, 3);
             lua_pop(L, 1);
@@ -714,6 +741,10 @@ static char *path_join(const char *dir, const char *name)
 static int prepare_outputs(Run *r, char *err, int err_sz)
 {
     size_t n = strlen(r->opt.out_dir);
+    if (n == 0) {
+        ns_set_err(err, err_sz, "-o: the output folder must be named (got an empty path)");
+        return -2;
+    }
     char *path = malloc(n + 1);
     if (!path) {
         ns_set_err(err, err_sz, "out of memory");
@@ -748,25 +779,37 @@ static int prepare_outputs(Run *r, char *err, int err_sz)
     r->report_tmp = path_join(r->opt.out_dir, ".report.json.part");
     char *old_t = path_join(r->opt.out_dir, "trajectory.csv");
     char *old_r = path_join(r->opt.out_dir, "report.json");
+    int rc = 0;
     if (!r->traj_tmp || !r->report_tmp || !old_t || !old_r) {
-        free(old_t);
-        free(old_r);
         ns_set_err(err, err_sz, "out of memory");
-        return -1;
+        rc = -1;
     }
-    remove(old_t);
-    remove(old_r);
+    /* Every final name this run will replace must be a regular file (or absent), checked
+     * before anything is removed: the run fails whole or not at all. */
+    if (rc == 0 &&
+        (ns_out_replaceable(old_t, "the trajectory", err, err_sz) ||
+         ns_out_replaceable(old_r, "the report", err, err_sz) ||
+         (r->opt.record && ns_out_replaceable(r->opt.record, "the control log", err, err_sz)) ||
+         (r->opt.video && ns_out_replaceable(r->opt.video, "the video", err, err_sz))))
+        rc = -1;
+    if (rc == 0) {
+        ns_out_remove_old(old_t);
+        ns_out_remove_old(old_r);
+    }
     free(old_t);
     free(old_r);
-    if (ns_run_render_clear_old(r->opt.out_dir, r->opt.frames, err, err_sz))
-        return -1;
-    r->traj = fopen(r->traj_tmp, "w");
-    if (!r->traj) {
-        ns_set_err(err, err_sz, "cannot write to output folder '%s': %s", r->opt.out_dir,
-                   strerror(errno));
-        return -1;
+    if (rc == 0 && ns_run_render_clear_old(r->opt.out_dir, r->opt.frames, err, err_sz))
+        rc = -1;
+    if (rc == 0) {
+        r->traj = ns_out_create_part(r->traj_tmp, "the trajectory", err, err_sz);
+        if (!r->traj)
+            rc = -1;
     }
-    return 0;
+    if (rc != 0 && r->made_dir) {
+        rmdir(r->opt.out_dir);
+        r->made_dir = false;
+    }
+    return rc;
 }
 
 static void write_traj_header(Run *r)
@@ -786,14 +829,14 @@ static void remove_outputs(Run *r)
         fclose(r->rec);
     r->rec = NULL;
     if (r->rec_tmp)
-        remove(r->rec_tmp);
+        ns_out_remove_part(r->rec_tmp);
     if (r->traj)
         fclose(r->traj);
     r->traj = NULL;
     if (r->traj_tmp)
-        remove(r->traj_tmp);
+        ns_out_remove_part(r->traj_tmp);
     if (r->report_tmp)
-        remove(r->report_tmp);
+        ns_out_remove_part(r->report_tmp);
     if (r->rendering) { /* also closes ffmpeg */
         ns_run_render_abort(&r->rr);
         r->rendering = false;
@@ -971,11 +1014,9 @@ static void timing_json(NsJson *j, const Run *r)
 
 static int write_report(Run *r, const Results *res, uint64_t hash, char *err, int err_sz)
 {
-    FILE *f = fopen(r->report_tmp, "w");
-    if (!f) {
-        ns_set_err(err, err_sz, "cannot write '%s': %s", r->report_tmp, strerror(errno));
+    FILE *f = ns_out_create_part(r->report_tmp, "the report", err, err_sz);
+    if (!f)
         return -1;
-    }
     NsJson j;
     ns_json_init(&j, f, 2);
     ns_json_begin_object(&j);
@@ -1030,6 +1071,8 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_int(&j, r->steps);
     ns_json_key(&j, "script_finished");
     ns_json_bool(&j, r->script_finished);
+    ns_json_key(&j, "time_limit_s"); /* > 0: the script was stopped at this simulated time */
+    ns_json_number(&j, r->time_capped ? NS_LIMIT_DEFAULT_SIM_TIME : 0.0);
     ns_json_key(&j, "dt_s");
     ns_json_number(&j, r->spec.dt);
     ns_json_key(&j, "sim_time_s");
@@ -1624,18 +1667,24 @@ static int run_loop(Run *r, char *err, int err_sz)
 {
     const NsRunSpec *sp = &r->spec;
     /* A run ends after --steps, after the scenario's duration, or when the script ends; a
-     * script that never ends stops at a cap with an error. */
-    const long hard_cap = 1000000;
+     * script that has not ended after NS_LIMIT_DEFAULT_SIM_TIME of simulated time (act.wait in
+     * a loop) is stopped there, and the report says it had not finished. */
     long max_steps = r->opt.steps > 0 ? r->opt.steps : 0;
+    if (max_steps > NS_LIMIT_STEPS) {
+        ns_set_err(err, err_sz, "--steps %ld: at most %ld", max_steps, NS_LIMIT_STEPS);
+        return -1;
+    }
     if (max_steps == 0 && sp->duration > 0.0) {
         double n = ceil(sp->duration / sp->dt - 1e-9);
-        if (!(n <= (double)hard_cap)) {
+        if (!(n <= (double)NS_LIMIT_STEPS)) {
             ns_set_err(err, err_sz, "%s: ns.scenario: duration / dt is %.3g steps (at most %ld)",
-                       r->sc.where, n, hard_cap);
+                       r->sc.where, n, NS_LIMIT_STEPS);
             return -1;
         }
         max_steps = (long)n;
     }
+    double cap_n = ceil(NS_LIMIT_DEFAULT_SIM_TIME / sp->dt - 1e-9);
+    long time_cap = cap_n < (double)NS_LIMIT_STEPS ? (long)cap_n : NS_LIMIT_STEPS;
     memcpy(r->last_tip, tip_of(r), sizeof r->last_tip);
     bool tty = !r->opt.quiet && isatty(fileno(stderr));
     int more = 1;
@@ -1645,12 +1694,18 @@ static int run_loop(Run *r, char *err, int err_sz)
         render_now(r, NULL, false, NULL, err, err_sz))
         return -1;
     while (max_steps > 0 ? r->steps < max_steps : more) {
-        if (max_steps == 0 && r->steps >= hard_cap) {
-            ns_set_err(err, err_sz,
-                       "%s: the script did not end within %ld steps (give the scenario a "
-                       "duration to cut it short)",
-                       r->sc.path, hard_cap);
+        if (ns_cleanup_signal() != 0) {
+            ns_set_err(err, err_sz, "%s: interrupted at step %ld (signal %d); nothing written",
+                       r->sc.path, r->steps, ns_cleanup_signal());
             return -1;
+        }
+        if (max_steps == 0 && r->steps >= time_cap) {
+            r->time_capped = true;
+            fprintf(stderr,
+                    "%s: the script had not ended after %g s of simulated time (the limit for a "
+                    "scenario without a duration): stopped there\n",
+                    r->sc.path, NS_LIMIT_DEFAULT_SIM_TIME);
+            break;
         }
         double t = (double)r->steps * sp->dt;
         NsControl ctl;
@@ -1760,7 +1815,7 @@ static int run_loop(Run *r, char *err, int err_sz)
             r->progress_shown = true;
         }
     }
-    r->script_finished = !more || !sp->has_script || r->opt.replay;
+    r->script_finished = !r->time_capped && (!more || !sp->has_script || r->opt.replay);
     if (r->progress_shown)
         fputs("\r\033[K", stderr);
     r->progress_shown = false;
@@ -1830,6 +1885,8 @@ static int parse_args(int argc, char **argv, RunOpts *o)
                 return usage_error("%s needs a value", a);
             i++;
             char *end;
+            if (!v[0])
+                return usage_error("%s: expected a path, got an empty string", a);
             if (strcmp(a, "-o") == 0) {
                 o->out_dir = v;
             } else if (strcmp(a, "--set") == 0) {
@@ -1852,7 +1909,7 @@ static int parse_args(int argc, char **argv, RunOpts *o)
                     return usage_error("--solver '%s': unknown solver (schur or paper)", v);
             } else {
                 long n = strtol(v, &end, 10);
-                if (*end || n < 1 || n > (strcmp(a, "--threads") == 0 ? 64 : 100000000))
+                if (*end || n < 1 || n > (strcmp(a, "--threads") == 0 ? 64 : NS_LIMIT_STEPS))
                     return usage_error("%s: expected a positive integer", a);
                 if (strcmp(a, "--steps") == 0)
                     o->steps = n;
@@ -1863,7 +1920,7 @@ static int parse_args(int argc, char **argv, RunOpts *o)
             if (!v)
                 return usage_error("%s needs a value", a);
             size_t n = strlen(v);
-            if (n < 5 || strcasecmp(v + n - 4, ".mp4") != 0)
+            if (n < 5 || strcasecmp(v + n - 4, ".mp4") != 0 || v[n - 5] == '/')
                 return usage_error("--video '%s': expected a FILE.mp4 path", v);
             o->video = v;
             i++;
@@ -1921,6 +1978,7 @@ int ns_cmd_run(int argc, char **argv)
     if (pa)
         return pa == 1 ? 0 : pa;
     char err[1024] = "";
+    ns_cleanup_install();
     int rc = prepare_outputs(&r, err, sizeof err) ? -2 : -1;
     if (rc == -1 && ns_scenario_load_set(r.opt.scenario, r.opt.sets, r.opt.nsets, &r.sc, err,
                                          sizeof err) == 0) {
@@ -1969,10 +2027,11 @@ int ns_cmd_run(int argc, char **argv)
         r.rec_tmp = malloc(n);
         if (r.rec_tmp)
             snprintf(r.rec_tmp, n, "%s.part", r.opt.record);
-        r.rec = r.rec_tmp ? fopen(r.rec_tmp, "w") : NULL;
+        r.rec =
+            r.rec_tmp ? ns_out_create_part(r.rec_tmp, "the control log", err, sizeof err) : NULL;
         if (!r.rec) {
-            ns_set_err(err, sizeof err, "cannot write the control log '%s': %s", r.opt.record,
-                       strerror(errno));
+            if (!r.rec_tmp)
+                ns_set_err(err, sizeof err, "out of memory");
             rc = -1;
         } else {
             ns_control_log_write_header(r.rec, r.opt.sets, r.opt.nsets);
@@ -2009,7 +2068,7 @@ int ns_cmd_run(int argc, char **argv)
     if (rc == 0) {
         char *traj = path_join(r.opt.out_dir, "trajectory.csv");
         char *rep = path_join(r.opt.out_dir, "report.json");
-        if (!traj || !rep || rename(r.traj_tmp, traj) || rename(r.report_tmp, rep)) {
+        if (!traj || !rep || ns_out_commit(r.traj_tmp, traj) || ns_out_commit(r.report_tmp, rep)) {
             ns_set_err(err, sizeof err, "cannot write to output folder '%s': %s", r.opt.out_dir,
                        strerror(errno));
             if (traj)
@@ -2027,7 +2086,7 @@ int ns_cmd_run(int argc, char **argv)
             int bad = ferror(r.rec) != 0;
             bad |= fclose(r.rec) != 0;
             r.rec = NULL;
-            if (bad || rename(r.rec_tmp, r.opt.record) != 0) {
+            if (bad || ns_out_commit(r.rec_tmp, r.opt.record) != 0) {
                 ns_set_err(err, sizeof err, "cannot write the control log '%s': %s", r.opt.record,
                            strerror(errno));
                 remove(traj);

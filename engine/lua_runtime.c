@@ -2,15 +2,20 @@
 #include "lua_runtime.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
 
 #include <lauxlib.h>
 #include <lualib.h>
 
+#include "cleanup.h"
+#include "ns_limits.h"
 #include "ns_config.h"
 
 /* The count hook runs every NS_HOOK_STEP instructions and charges them to the budget. */
@@ -19,15 +24,18 @@
  * is charged so (a tight endless loop fires one per iteration). */
 #define NS_LINE_EVENT_COST 8
 /* Memory a scenario's Lua state may hold; past it allocations fail ("not enough memory"). */
-#define NS_LUA_MEMORY_LIMIT ((size_t)1 << 30)
+#define NS_LUA_MEMORY_LIMIT NS_LIMIT_LUA_MEMORY
 
 struct NsLua {
     lua_State *L;
     char *scripts_dir;
     char *scenario_dir;
     char *scenario_source; /* "@path" of the scenario chunk, for the line hook */
-    long long budget;      /* instructions per protected entry */
-    long long remaining;   /* left in the current entry */
+    long long budget;      /* instructions of the current phase (loading, the run) */
+    long long remaining;   /* left in the current phase, over all its entries together */
+    const char *phase;     /* "loading the scenario", "the run": for messages */
+    double deadline;       /* CLOCK_MONOTONIC seconds the phase must end by (0: none) */
+    double seconds;        /* the phase's wall-clock limit [s], for messages */
     int last_line;         /* last line run in the scenario chunk (see ns_where) */
     int hook_mask;         /* LUA_MASKCOUNT, plus LUA_MASKLINE while the chunk runs */
     int modules_ref;       /* registry ref: the private require cache */
@@ -92,34 +100,62 @@ static void *limited_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 
 static void set_hook(lua_State *L, int mask, int count);
 
-/* Count events charge the budget; line events (only while the scenario chunk runs) remember
- * where in the scenario file we are. */
+static double monotonic_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Raises the "budget used up" error at the current line. From then on every instruction fails
+ * (the hook fires at each), so a script that catches the error with pcall cannot go on: the
+ * error unwinds every pcall up to C. */
+static int exhausted(lua_State *L, lua_Debug *ar, const char *what)
+{
+    NsLua *rt = runtime_of(L);
+    rt->remaining = 0;
+    set_hook(L, rt->hook_mask, 1);
+    if (ar && lua_getinfo(L, "Sl", ar) && ar->currentline > 0)
+        lua_pushfstring(L, "%s:%d: %s", source_name(ar), ar->currentline, what);
+    else
+        lua_pushstring(L, what);
+    return lua_error(L);
+}
+
+static const char *budget_message(NsLua *rt, char *buf, size_t n)
+{
+    snprintf(buf, n,
+             "instruction limit exceeded: %s may run %.3g Lua instructions in all "
+             "(an endless loop?)",
+             rt->phase ? rt->phase : "the script", (double)rt->budget);
+    return buf;
+}
+
+/* Count events charge the budget and check the phase's wall clock; line events (only while
+ * the scenario chunk runs) remember where in the scenario file we are. */
 static void hook(lua_State *L, lua_Debug *ar)
 {
     NsLua *rt = runtime_of(L);
+    char buf[200];
     if (ar->event == LUA_HOOKLINE) {
         if (rt->scenario_source && lua_getinfo(L, "S", ar) &&
             strcmp(ar->source, rt->scenario_source) == 0)
             rt->last_line = ar->currentline;
         rt->remaining -= NS_LINE_EVENT_COST;
-        if (rt->remaining > 0)
-            return;
     } else if (ar->event == LUA_HOOKCOUNT) {
         rt->remaining -= NS_HOOK_STEP;
-        if (rt->remaining > 0)
-            return;
+        if (ns_cleanup_signal() != 0)
+            exhausted(L, ar, "interrupted by a signal");
+        if (rt->deadline > 0.0 && monotonic_s() > rt->deadline) {
+            snprintf(buf, sizeof buf, "%s took longer than its limit of %.0f s",
+                     rt->phase ? rt->phase : "the script", rt->seconds);
+            exhausted(L, ar, buf);
+        }
     } else {
         return;
     }
-    /* Exhausted: from now on every instruction fails, so a script that catches the error with
-     * pcall cannot go on looping; the error unwinds every pcall up to C. */
-    set_hook(L, rt->hook_mask, 1);
-    if (lua_getinfo(L, "Sl", ar) && ar->currentline > 0)
-        lua_pushfstring(L, "%s:%d: instruction limit exceeded (endless loop?)", source_name(ar),
-                        ar->currentline);
-    else
-        lua_pushstring(L, "instruction limit exceeded (endless loop?)");
-    lua_error(L);
+    if (rt->remaining <= 0)
+        exhausted(L, ar, budget_message(rt, buf, sizeof buf));
 }
 
 static void set_hook(lua_State *L, int mask, int count)
@@ -127,6 +163,8 @@ static void set_hook(lua_State *L, int mask, int count)
     lua_sethook(L, hook, mask, count);
 }
 
+/* The error's text: strings as they are, anything else (error(nil), error({})) described and
+ * given the file and line of the Lua function that raised it, so every message has one. */
 static int message_handler(lua_State *L)
 {
     if (lua_type(L, 1) == LUA_TSTRING || lua_type(L, 1) == LUA_TNUMBER) {
@@ -136,7 +174,14 @@ static int message_handler(lua_State *L)
     }
     if (luaL_callmeta(L, 1, "__tostring") && lua_type(L, -1) == LUA_TSTRING)
         return 1;
-    lua_pushfstring(L, "(error object is a %s value)", luaL_typename(L, 1));
+    lua_Debug ar;
+    for (int level = 1; lua_getstack(L, level, &ar); level++)
+        if (lua_getinfo(L, "Sl", &ar) && ar.currentline > 0) {
+            lua_pushfstring(L, "%s:%d: error (the error value is %s, not a message)",
+                            source_name(&ar), ar.currentline, luaL_typename(L, 1));
+            return 1;
+        }
+    lua_pushfstring(L, "error (the error value is %s, not a message)", luaL_typename(L, 1));
     return 1;
 }
 
@@ -144,10 +189,21 @@ int ns_lua_call(NsLua *rt, int nargs, int nresults, char *err, int err_sz)
 {
     lua_State *L = rt->L;
     int base = lua_gettop(L) - nargs; /* the function's slot */
+    if (rt->remaining <= 0 || (rt->deadline > 0.0 && monotonic_s() > rt->deadline)) {
+        char buf[200];
+        if (rt->remaining <= 0)
+            budget_message(rt, buf, sizeof buf);
+        else
+            snprintf(buf, sizeof buf, "%s took longer than its limit of %.0f s",
+                     rt->phase ? rt->phase : "the script", rt->seconds);
+        snprintf(err, (size_t)err_sz, "%s: %s",
+                 rt->scenario_source ? rt->scenario_source + 1 : "needlesim", buf);
+        lua_settop(L, base - 1);
+        return -1;
+    }
     lua_pushcfunction(L, message_handler);
     lua_insert(L, base);
-    rt->remaining = rt->budget;
-    set_hook(L, rt->hook_mask, NS_HOOK_STEP);
+    set_hook(L, rt->hook_mask, rt->remaining < NS_HOOK_STEP ? 1 : NS_HOOK_STEP);
     int rc = lua_pcall(L, nargs, nresults, base);
     if (rc == LUA_ERRMEM) {
         /* No message handler runs for memory errors, so no file:line either. */
@@ -227,6 +283,31 @@ static int ns_where(lua_State *L)
     return 1;
 }
 
+/* A script file for the sandbox: a regular file of at most NS_LIMIT_SCRIPT_FILE_BYTES (a FIFO
+ * would block, /dev/zero never end). Returns 0, or -1 with the reason in why. */
+static int check_script_file(const char *path, char *why, size_t n)
+{
+    struct stat st;
+    if (stat(path, &st) != 0) {
+        snprintf(why, n, "%s", strerror(errno));
+        return -1;
+    }
+    if (S_ISDIR(st.st_mode)) {
+        snprintf(why, n, "Is a directory");
+        return -1;
+    }
+    if (!S_ISREG(st.st_mode)) {
+        snprintf(why, n, "not a regular file");
+        return -1;
+    }
+    if ((long long)st.st_size > NS_LIMIT_SCRIPT_FILE_BYTES) {
+        snprintf(why, n, "%lld bytes, more than a script may have (%lld)", (long long)st.st_size,
+                 (long long)NS_LIMIT_SCRIPT_FILE_BYTES);
+        return -1;
+    }
+    return 0;
+}
+
 /* Module names: plain words separated by dots ("helpers", "needlesim.materials"); no path
  * separators, no "..", nothing absolute. */
 static bool valid_module_name(const char *name)
@@ -304,6 +385,9 @@ static int sandbox_require(lua_State *L)
     struct stat st;
     if (stat(path, &st) != 0 || !S_ISREG(st.st_mode))
         return luaL_error(L, "require '%s': module not found (no file '%s')", name, path);
+    char why[160];
+    if (check_script_file(path, why, sizeof why) != 0)
+        return luaL_error(L, "require '%s': cannot read '%s': %s", name, path, why);
     if (luaL_loadfilex(L, path, "t") != LUA_OK) /* 4: chunk */
         return lua_error(L);
     lua_pushlightuserdata(L, (void *)&loading_marker);
@@ -322,6 +406,115 @@ static int sandbox_require(lua_State *L)
     lua_pushvalue(L, -1);
     lua_setfield(L, 2, name);
     return 1;
+}
+
+/* setmetatable(t, mt): the base library's, refusing a metatable with a __gc field. Lua runs
+ * finalizers with hooks off, so a __gc that loops would escape the instruction budget and the
+ * wall clock; an object is only marked for finalization when its metatable has __gc at the
+ * time it is set, so checking here is enough. */
+static int sandbox_setmetatable(lua_State *L)
+{
+    if (lua_type(L, 2) == LUA_TTABLE) {
+        lua_pushliteral(L, "__gc");
+        if (lua_rawget(L, 2) != LUA_TNIL)
+            return luaL_error(L, "setmetatable: __gc finalizers are not allowed in scenarios");
+        lua_pop(L, 1);
+    }
+    lua_pushvalue(L, lua_upvalueindex(1));
+    lua_insert(L, 1);
+    lua_call(L, lua_gettop(L) - 1, LUA_MULTRET);
+    return lua_gettop(L);
+}
+
+/* The work a pattern match may do, bounded before it runs: the matcher (lstrlib.c) is C code
+ * the instruction hook never sees, and backtracking over k repetition items (*, +, -, ?, %b)
+ * can take subject^(k+1) steps. The estimate len(pattern) * n^(k + unanchored) is charged to
+ * the budget, and refused past NS_LIMIT_PATTERN_WORK. */
+static double pattern_work(const char *p, size_t lp, size_t n, bool anchored)
+{
+    int k = 0;
+    for (size_t i = 0; i < lp; i++) {
+        char c = p[i];
+        if (c == '%') {
+            if (i + 1 < lp && p[i + 1] == 'b') {
+                k++;
+                i += 3; /* %bxy */
+            } else {
+                i++;
+            }
+        } else if (c == '[') { /* a set: skip to its closing ']' */
+            i++;
+            if (i < lp && p[i] == '^')
+                i++;
+            if (i < lp && p[i] == ']')
+                i++;
+            while (i < lp && p[i] != ']') {
+                if (p[i] == '%')
+                    i++;
+                i++;
+            }
+        } else if (c == '*' || c == '+' || c == '-' || c == '?') {
+            k++;
+        }
+    }
+    double nn = (double)n + 1.0;
+    return (double)(lp + 1) * pow(nn, (double)k + (anchored ? 0.0 : 1.0));
+}
+
+/* string.find / match / gmatch / gsub with their pattern bounded (upvalue 1: the original;
+ * upvalue 2: 1 for find, whose 4th argument `plain` makes it a plain search). */
+static int sandbox_pattern(lua_State *L)
+{
+    NsLua *rt = runtime_of(L);
+    size_t n, lp;
+    const char *s = luaL_checklstring(L, 1, &n);
+    const char *p = luaL_checklstring(L, 2, &lp);
+    (void)s;
+    bool plain = lua_tointeger(L, lua_upvalueindex(2)) == 1 && lua_toboolean(L, 4);
+    if (n > NS_LIMIT_PATTERN_SUBJECT || lp > NS_LIMIT_PATTERN_LENGTH)
+        return luaL_error(L,
+                          "pattern matching is limited to subjects of %d bytes and patterns of %d "
+                          "bytes in scenarios (got %d and %d)",
+                          NS_LIMIT_PATTERN_SUBJECT, NS_LIMIT_PATTERN_LENGTH, (int)n, (int)lp);
+    double work =
+        plain ? (double)(n + 1) * (double)(lp + 1) : pattern_work(p, lp, n, lp > 0 && p[0] == '^');
+    if (work > NS_LIMIT_PATTERN_WORK) {
+        char buf[200]; /* (lua_pushfstring knows no %g) */
+        snprintf(buf, sizeof buf,
+                 "a pattern of %d bytes on a subject of %d bytes could take %.3g matching steps "
+                 "(at most %.3g)",
+                 (int)lp, (int)n, work, (double)NS_LIMIT_PATTERN_WORK);
+        return luaL_error(L, "%s: use fewer repetitions (*, +, -, ?) or a shorter subject", buf);
+    }
+    rt->remaining -= (long long)work / 16; /* a matching step is a few machine instructions */
+    if (rt->remaining <= 0) {
+        char buf[200];
+        return exhausted(L, NULL, budget_message(rt, buf, sizeof buf));
+    }
+    lua_pushvalue(L, lua_upvalueindex(1));
+    lua_insert(L, 1);
+    lua_call(L, lua_gettop(L) - 1, LUA_MULTRET);
+    return lua_gettop(L);
+}
+
+static void wrap_pattern(lua_State *L, int strtab, const char *name, int is_find)
+{
+    lua_getfield(L, strtab, name);
+    lua_pushinteger(L, is_find);
+    lua_pushcclosure(L, sandbox_pattern, 2);
+    lua_setfield(L, strtab, name);
+}
+
+/* Lua's last line of defence: an error outside any protected call (a bug of ours: every entry
+ * is meant to be protected). One line, the temporary files removed, exit 2. */
+static int panic(lua_State *L)
+{
+    const char *msg = lua_tostring(L, -1);
+    char line[600];
+    snprintf(line, sizeof line, "needlesim: internal error: unprotected Lua error: %s",
+             msg ? msg : "(no message)");
+    ns_cleanup_fatal(line);
+    return 0;
 }
 
 /* Sets up the libraries and the sandbox's globals (runs protected: it allocates). */
@@ -359,9 +552,18 @@ static int open_sandbox(lua_State *L)
     lua_pushcfunction(L, ns_where);
     lua_setfield(L, -2, "__ns_where");
 
+    lua_getfield(L, -1, "setmetatable");
+    lua_pushcclosure(L, sandbox_setmetatable, 1);
+    lua_setfield(L, -2, "setmetatable");
+
     lua_getfield(L, -1, "string");
     lua_pushnil(L);
     lua_setfield(L, -2, "dump");
+    int strtab = lua_gettop(L);
+    wrap_pattern(L, strtab, "find", 1);
+    wrap_pattern(L, strtab, "match", 0);
+    wrap_pattern(L, strtab, "gmatch", 0);
+    wrap_pattern(L, strtab, "gsub", 0);
     lua_pop(L, 1);
 
     /* Deterministic random numbers unless the scenario reseeds. */
@@ -383,7 +585,6 @@ NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
         snprintf(err, (size_t)err_sz, "needlesim: out of memory");
         return NULL;
     }
-    rt->budget = NS_LUA_DEFAULT_BUDGET;
     const char *env = getenv("NEEDLESIM_SCRIPTS");
     rt->scripts_dir = dup_string(env && env[0] ? env : NS_SCRIPTS_DIR);
     const char *slash = strrchr(scenario_path, '/');
@@ -406,7 +607,10 @@ NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
         return NULL;
     }
     *(NsLua **)lua_getextraspace(rt->L) = rt;
+    lua_atpanic(rt->L, panic);
     rt->hook_mask = LUA_MASKCOUNT;
+    ns_lua_begin_phase(rt, "loading the scenario", NS_LIMIT_LOAD_INSTRUCTIONS,
+                       NS_LIMIT_LOAD_SECONDS);
     lua_pushcfunction(rt->L, open_sandbox);
     if (ns_lua_call(rt, 0, 0, err, err_sz) != 0) {
         ns_lua_close(rt);
@@ -442,21 +646,20 @@ const char *ns_lua_scenario_dir(const NsLua *rt)
     return rt->scenario_dir;
 }
 
-void ns_lua_set_budget(NsLua *rt, long long instructions)
+void ns_lua_begin_phase(NsLua *rt, const char *phase, long long instructions, double seconds)
 {
-    rt->budget = instructions > 0 ? instructions : NS_LUA_DEFAULT_BUDGET;
+    rt->phase = phase;
+    rt->budget = rt->remaining = instructions;
+    rt->seconds = seconds;
+    rt->deadline = seconds > 0.0 ? monotonic_s() + seconds : 0.0;
 }
 
 int ns_lua_run_scenario(NsLua *rt, const char *path, char *err, int err_sz)
 {
     lua_State *L = rt->L;
-    struct stat st;
-    if (stat(path, &st) != 0) {
-        snprintf(err, (size_t)err_sz, "needlesim: cannot open '%s': %s", path, strerror(errno));
-        return -1;
-    }
-    if (S_ISDIR(st.st_mode)) {
-        snprintf(err, (size_t)err_sz, "needlesim: cannot open '%s': Is a directory", path);
+    char why[160];
+    if (check_script_file(path, why, sizeof why) != 0) {
+        snprintf(err, (size_t)err_sz, "needlesim: cannot open '%s': %s", path, why);
         return -1;
     }
     int rc = luaL_loadfilex(L, path, "t");

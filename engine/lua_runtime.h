@@ -9,16 +9,17 @@
  * the registry as "ns.require", whatever a script does to its globals). math.random is seeded with
  * a constant, so a scenario is deterministic unless it reseeds.
  *
- * Every entry from C into Lua goes through ns_lua_call: a protected call with a fresh
- * instruction budget (an endless loop fails instead of hanging) whose error, if any, is one
- * line "file:line: message". */
+ * Every entry from C into Lua goes through ns_lua_call: a protected call whose error, if any,
+ * is one line "file:line: message". The instruction budget and the wall clock belong to a
+ * phase (loading the scenario, then the run), not to one call: all the calls of a phase draw on
+ * one budget (sim/limits.h), so a shape function the mesher calls a million times cannot
+ * escape it. setmetatable refuses __gc (finalizers run with hooks off) and the string
+ * library's pattern functions are bounded before they run (their matcher is C). A Lua error
+ * outside every protected call (a bug) ends the program with one line, not an abort. */
 #ifndef NS_LUA_RUNTIME_H
 #define NS_LUA_RUNTIME_H
 
 #include <lua.h>
-
-/* Instructions one protected entry from C may run before it fails. */
-#define NS_LUA_DEFAULT_BUDGET 500000000LL
 
 typedef struct NsLua NsLua;
 
@@ -32,11 +33,14 @@ const char *ns_lua_scripts_dir(const NsLua *rt);
 /* The scenario's folder ("." when the path has none). */
 const char *ns_lua_scenario_dir(const NsLua *rt);
 
-/* Instructions each later ns_lua_call may run (default NS_LUA_DEFAULT_BUDGET). */
-void ns_lua_set_budget(NsLua *rt, long long instructions);
+/* Starts a phase ("loading the scenario" is begun by ns_lua_open; the run begins "the run"):
+ * every ns_lua_call until the next phase draws on `instructions` Lua instructions in all and
+ * must end within `seconds` of wall-clock time from now (0: no limit). phase is a static
+ * string used in messages. */
+void ns_lua_begin_phase(NsLua *rt, const char *phase, long long instructions, double seconds);
 
-/* lua_pcall of the function below nargs arguments on the stack, with the message handler and
- * a fresh budget. Returns 0 with nresults values pushed, or -1 with the stack back where it
+/* lua_pcall of the function below nargs arguments on the stack, with the message handler, on
+ * what is left of the phase's budget. Returns 0 with nresults values pushed, or -1 with the stack back where it
  * was minus the function and arguments, and a one-line message in err. */
 int ns_lua_call(NsLua *rt, int nargs, int nresults, char *err, int err_sz);
 

@@ -1,6 +1,9 @@
 /* Frames, video and contact sheet of a run (run_render.h). */
 #include "run_render.h"
 
+#include "cleanup.h"
+#include "out_files.h"
+
 #include <dirent.h>
 #include <stdbool.h>
 #include <errno.h>
@@ -99,7 +102,19 @@ int ns_run_render_clear_old(const char *out_dir, bool frames, char *err, int err
     if (!sheet || !dir) {
         ns_set_err(err, err_sz, "out of memory");
         rc = -1;
+    } else if (ns_out_replaceable(sheet, "the contact sheet", err, err_sz)) {
+        rc = -1;
     } else {
+        struct stat st;
+        if (lstat(dir, &st) == 0 && !S_ISDIR(st.st_mode)) {
+            ns_set_err(err, err_sz,
+                       "'%s' exists and is not a folder: refusing to write frames there or "
+                       "remove it",
+                       dir);
+            free(sheet);
+            free(dir);
+            return -1;
+        }
         int only = frames_only(dir);
         if (only < 0 && frames) {
             ns_set_err(err, err_sz,
@@ -108,7 +123,7 @@ int ns_run_render_clear_old(const char *out_dir, bool frames, char *err, int err
                        dir);
             rc = -1;
         } else {
-            remove(sheet);
+            ns_out_remove_old(sheet);
             if (only > 0)
                 remove_frames_dir(dir);
         }
@@ -134,8 +149,14 @@ int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int
             ns_set_err(err, err_sz, "out of memory");
             return -1;
         }
+        struct stat st;
+        if (lstat(rr->frames_tmp, &st) == 0 && !S_ISDIR(st.st_mode)) {
+            ns_set_err(err, err_sz, "'%s' exists and is not a folder: refusing to replace it",
+                       rr->frames_tmp);
+            return -1;
+        }
         remove_frames_dir(rr->frames_tmp); /* a crashed run's leftovers */
-        if (mkdir(rr->frames_tmp, 0777) != 0) {
+        if (mkdir(rr->frames_tmp, 0777) != 0 || ns_cleanup_add(rr->frames_tmp) != 0) {
             ns_set_err(err, err_sz, "cannot make the frames folder '%s': %s", rr->frames_tmp,
                        strerror(errno));
             return -1;
@@ -148,6 +169,9 @@ int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int
             ns_set_err(err, err_sz, "out of memory");
             return -1;
         }
+        if (ns_out_replaceable(rr->summary_tmp, "the contact sheet", err, err_sz) ||
+            ns_cleanup_add(rr->summary_tmp) != 0)
+            return -1;
     }
     if (ns_frame_open(&rr->frame, o->width, o->height, err, err_sz))
         return -1;
@@ -157,6 +181,10 @@ int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int
             ns_set_err(err, err_sz, "out of memory");
             return -1;
         }
+        if (ns_out_replaceable(rr->video_tmp, "the video", err, err_sz) ||
+            ns_cleanup_add(rr->video_tmp) != 0)
+            return -1;
+        ns_out_remove_old(rr->video_tmp);
         rr->children_cpu0 = children_cpu_s();
         rr->video = ns_video_open(rr->video_tmp, o->width, o->height, o->fps, err, err_sz);
         if (!rr->video)
@@ -321,14 +349,15 @@ int ns_run_render_commit(NsRunRender *rr, char *err, int err_sz)
      * picture back out (ns_run_render_uncommit). */
     if (rr->o.frames) {
         remove_frames_dir(rr->frames_dir); /* frames only: ns_run_render_clear_old checked */
-        if (rename(rr->frames_tmp, rr->frames_dir) != 0) {
+        if (rename(rr->frames_tmp, rr->frames_dir) != 0) { /* (a folder: checked at open) */
             ns_set_err(err, err_sz, "cannot write '%s': %s", rr->frames_dir, strerror(errno));
             return -1;
         }
+        ns_cleanup_forget(rr->frames_tmp);
         rr->committed |= 1;
     }
     if (rr->o.video) {
-        if (rename(rr->video_tmp, rr->o.video) != 0) {
+        if (ns_out_commit(rr->video_tmp, rr->o.video) != 0) {
             ns_set_err(err, err_sz, "cannot write '%s': %s", rr->o.video, strerror(errno));
             ns_run_render_uncommit(rr);
             return -1;
@@ -336,7 +365,7 @@ int ns_run_render_commit(NsRunRender *rr, char *err, int err_sz)
         rr->committed |= 2;
     }
     if (rr->o.summary) {
-        if (rename(rr->summary_tmp, rr->summary_path) != 0) {
+        if (ns_out_commit(rr->summary_tmp, rr->summary_path) != 0) {
             ns_set_err(err, err_sz, "cannot write '%s': %s", rr->summary_path, strerror(errno));
             ns_run_render_uncommit(rr);
             return -1;
@@ -351,9 +380,9 @@ void ns_run_render_uncommit(NsRunRender *rr)
     if (rr->committed & 1)
         remove_frames_dir(rr->frames_dir);
     if (rr->committed & 2)
-        remove(rr->o.video);
+        ns_out_remove_old(rr->o.video);
     if (rr->committed & 4)
-        remove(rr->summary_path);
+        ns_out_remove_old(rr->summary_path);
     rr->committed = 0;
 }
 
@@ -365,11 +394,13 @@ void ns_run_render_abort(NsRunRender *rr)
         rr->video = NULL;
     }
     if (rr->video_tmp)
-        remove(rr->video_tmp);
+        ns_out_remove_part(rr->video_tmp);
     if (rr->summary_tmp)
-        remove(rr->summary_tmp);
-    if (rr->frames_tmp)
+        ns_out_remove_part(rr->summary_tmp);
+    if (rr->frames_tmp) {
         remove_frames_dir(rr->frames_tmp);
+        ns_cleanup_forget(rr->frames_tmp);
+    }
     ns_run_render_free(rr);
 }
 

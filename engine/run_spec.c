@@ -3,12 +3,14 @@
 
 #include <lauxlib.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "err.h"
 #include "mesh.h"
+#include "ns_limits.h"
 #include "remesh.h"
 
 /* t[key] without metamethods (pushed; its type returned): a scenario may put metatables on
@@ -25,22 +27,29 @@ static int raw_field(lua_State *L, int idx, const char *key)
     return lua_rawget(L, idx);
 }
 
+/* t[key] as a number: dflt when absent, NaN when it is anything but a number (check_spec then
+ * names the field: a table may have been changed after its constructor checked it). */
 static double num_field(lua_State *L, int idx, const char *key, double dflt)
 {
     double v = dflt;
-    if (raw_field(L, idx, key) == LUA_TNUMBER)
+    int t = raw_field(L, idx, key);
+    if (t == LUA_TNUMBER)
         v = lua_tonumber(L, -1);
+    else if (t != LUA_TNIL)
+        v = NAN;
     lua_pop(L, 1);
     return v;
 }
 
+/* t[key] as {x, y, z}: NaN in every component that is not a number, and in all three when
+ * the field is absent or not a table (every vector read here is required). */
 static void vec_field(lua_State *L, int idx, const char *key, double out[3])
 {
-    out[0] = out[1] = out[2] = 0.0;
+    out[0] = out[1] = out[2] = NAN;
     if (raw_field(L, idx, key) == LUA_TTABLE)
         for (int i = 0; i < 3; i++) { /* (a table: rawgeti is safe) */
-            lua_rawgeti(L, -1, i + 1);
-            out[i] = lua_tonumber(L, -1);
+            int t = lua_rawgeti(L, -1, i + 1);
+            out[i] = t == LUA_TNUMBER ? lua_tonumber(L, -1) : NAN;
             lua_pop(L, 1);
         }
     lua_pop(L, 1);
@@ -94,7 +103,9 @@ static void read_camera(lua_State *L, int si, NsRunCamera *cam)
         }
         lua_pop(L, 1);
         cam->fps = num_field(L, ci, "fps", 25.0);
-        cam->frame_every = (int)num_field(L, ci, "frame_every", 1.0);
+        double every = num_field(L, ci, "frame_every", 1.0);
+        /* checked by check_spec; kept in range here so that the int holds it */
+        cam->frame_every = every >= 1.0 && every <= 1e6 && every == floor(every) ? (int)every : 0;
         raw_field(L, ci, "cut_normal");
         cam->has_cut_normal = lua_istable(L, -1);
         lua_pop(L, 1);
@@ -126,7 +137,13 @@ static int read_lists(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int s
             lua_pop(L, 1);
             if (!m->name)
                 rc = -1;
-            else if (ns_mesh_locate(&sc->mesh, m->at, -1, 1e-9, NULL) < 0) {
+            else if (!(isfinite(m->at[0]) && isfinite(m->at[1]) && isfinite(m->at[2]))) {
+                ns_set_err(err, err_sz,
+                           "%s: ns.scenario: markers[%d].at must be {x, y, z}: three finite "
+                           "numbers",
+                           sc->where, i + 1);
+                return -1;
+            } else if (ns_mesh_locate(&sc->mesh, m->at, -1, 1e-9, NULL) < 0) {
                 ns_set_err(err, err_sz,
                            "%s: ns.scenario: markers[%d] '%s' at (%g, %g, %g) m is outside the "
                            "tissue",
@@ -214,6 +231,108 @@ void ns_run_spec_free(NsRunSpec *spec)
     memset(spec, 0, sizeof *spec);
 }
 
+static bool finite3(const double v[3])
+{
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+static bool nonzero3(const double v[3])
+{
+    return finite3(v) && (v[0] != 0.0 || v[1] != 0.0 || v[2] != 0.0);
+}
+
+static bool in_range(double x, double lo, double hi)
+{
+    return isfinite(x) && x >= lo && x <= hi;
+}
+
+#if defined(__GNUC__)
+__attribute__((format(printf, 4, 5)))
+#endif
+static int
+bad(char *err, int err_sz, const char *where, const char *fmt, ...)
+{
+    int n = snprintf(err, (size_t)err_sz, "%s: ns.scenario: ", where);
+    if (n >= 0 && n < err_sz) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(err + n, (size_t)(err_sz - n), fmt, ap);
+        va_end(ap);
+    }
+    return -1;
+}
+
+/* Every value the run uses, checked here in C where it is read, whatever scripts/needlesim.lua
+ * checked when the table was made: a scenario can change its tables afterwards (sc.dt = 0,
+ * camera.frame_every = 0, entry.point = {"a"}), and a bad value must be named, not divided
+ * by. Ranges: sim/ns_limits.h and the constructors' own. */
+static int check_spec(const NsScenario *sc, const NsRunSpec *s, char *err, int err_sz)
+{
+    const char *w = sc->where;
+    if (!in_range(s->dt, NS_LIMIT_DT_MIN, NS_LIMIT_DT_MAX))
+        return bad(err, err_sz, w, "dt must be a number in [%g, %g] s (got %g)", NS_LIMIT_DT_MIN,
+                   NS_LIMIT_DT_MAX, s->dt);
+    if (!in_range(s->duration, 0.0, NS_LIMIT_SIM_TIME_MAX))
+        return bad(err, err_sz, w, "duration must be a number in [0, %g] s (got %g)",
+                   NS_LIMIT_SIM_TIME_MAX, s->duration);
+    if (!in_range(s->diameter, 1e-5, 0.02) || !in_range(s->inner_diameter, 0.0, s->diameter) ||
+        s->inner_diameter >= s->diameter)
+        return bad(err, err_sz, w,
+                   "needle.diameter must be in [1e-05, 0.02] m and inner_diameter in [0, "
+                   "diameter) (got %g and %g)",
+                   s->diameter, s->inner_diameter);
+    if (!in_range(s->youngs, 1e6, 1e13) || !in_range(s->density, 10.0, 1e5))
+        return bad(err, err_sz, w,
+                   "needle.youngs must be in [1e6, 1e13] Pa and density in [10, 1e5] kg/m^3 "
+                   "(got %g and %g)",
+                   s->youngs, s->density);
+    if (!in_range(s->bevel_deg, 1.0, 89.0) || !in_range(s->arc_curvature, 0.0, 1000.0))
+        return bad(err, err_sz, w,
+                   "needle.bevel_deg must be in [1, 89] and curvature in [0, 1000] 1/m (got %g "
+                   "and %g)",
+                   s->bevel_deg, s->arc_curvature);
+    if (!finite3(s->entry_point))
+        return bad(err, err_sz, w, "entry.point must be {x, y, z}: three finite numbers [m]");
+    if (!nonzero3(s->entry_dir))
+        return bad(err, err_sz, w,
+                   "entry.direction must be {x, y, z}: three finite numbers, not all zero");
+    if (s->has_bevel_toward && !nonzero3(s->bevel_toward))
+        return bad(err, err_sz, w,
+                   "entry.bevel_toward must be {x, y, z}: three finite numbers, not all zero");
+    for (int i = 0; i < s->target_count; i++) {
+        const NsRunTarget *t = &s->targets[i];
+        if (!finite3(t->at))
+            return bad(err, err_sz, w, "targets[%d].at must be {x, y, z}: three finite numbers",
+                       i + 1);
+        if (!in_range(t->tolerance, 1e-6, 1.0))
+            return bad(err, err_sz, w,
+                       "targets[%d].tolerance must be a number in [1e-06, 1] m (got %g)", i + 1,
+                       t->tolerance);
+    }
+    for (int i = 0; i < s->marker_count; i++)
+        if (!finite3(s->markers[i].at))
+            return bad(err, err_sz, w, "markers[%d].at must be {x, y, z}: three finite numbers",
+                       i + 1);
+    const NsRunCamera *c = &s->camera;
+    if (!in_range(c->fps, 0.1, 1000.0))
+        return bad(err, err_sz, w, "camera.fps must be a number in [0.1, 1000] (got %g)", c->fps);
+    if (c->frame_every < 1)
+        return bad(err, err_sz, w, "camera.frame_every must be a whole number in [1, 1e6]");
+    if (c->has_cut_normal && !nonzero3(c->cut_normal))
+        return bad(err, err_sz, w,
+                   "camera.cut_normal must be {x, y, z}: three finite numbers, not all zero");
+    const double solver[3] = {s->tolerance, s->check_tolerance, s->lazy_threshold};
+    static const char *const names[3] = {"tolerance", "check_tolerance", "lazy_threshold"};
+    for (int k = 0; k < 3; k++)
+        if (solver[k] != -1.0 && !in_range(solver[k], k == 2 ? 0.0 : 1e-15, 1.0))
+            return bad(err, err_sz, w, "solver.%s must be a number in (0, 1] (got %g)", names[k],
+                       solver[k]);
+    if (!in_range(s->accuracy, 0.0, 1.0) || !in_range(s->accuracy_tip_error, 0.0, 1e3) ||
+        !in_range(s->accuracy_cost, 0.0, 1e12))
+        return bad(err, err_sz, w, "accuracy must hold finite, non-negative numbers");
+    return 0;
+}
+
 int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_sz)
 {
     memset(spec, 0, sizeof *spec);
@@ -292,7 +411,13 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
             t->tolerance = num_field(L, lua_gettop(L), "tolerance", 0.0);
             spec->target_count = i + 1;
             lua_pop(L, 1);
-            if (ns_mesh_locate(&sc->mesh, t->at, -1, 1e-9, NULL) < 0) {
+            if (!(isfinite(t->at[0]) && isfinite(t->at[1]) && isfinite(t->at[2]))) {
+                ns_set_err(err, err_sz,
+                           "%s: ns.scenario: targets[%d].at must be {x, y, z}: three finite "
+                           "numbers",
+                           sc->where, i + 1);
+                rc = -1;
+            } else if (ns_mesh_locate(&sc->mesh, t->at, -1, 1e-9, NULL) < 0) {
                 ns_set_err(err, err_sz,
                            "%s: ns.scenario: targets[%d] '%s' at (%g, %g, %g) m is outside the "
                            "tissue",
@@ -328,6 +453,8 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
     lua_settop(L, top);
+    if (rc == 0)
+        rc = check_spec(sc, spec, err, err_sz);
     if (rc)
         ns_run_spec_free(spec);
     return rc;

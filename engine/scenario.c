@@ -20,6 +20,7 @@
 #include <lauxlib.h>
 
 #include "mesh_io.h"
+#include "ns_limits.h"
 #include "quality.h"
 #include "shape.h"
 
@@ -87,13 +88,37 @@ fail(Builder *b, const char *fmt, ...)
 
 /* ---- reading tables ------------------------------------------------------------------------ */
 
+/* t[key] and t[i] without metamethods, pushed, their type returned; nil when t is not a table.
+ * A scenario may put metatables on the tables it returns (an erroring __index, a __len that
+ * returns 1.5): none of that code may run here. Everything below reads through these. */
+static int rawfield(lua_State *L, int idx, const char *key)
+{
+    idx = lua_absindex(L, idx);
+    if (!lua_istable(L, idx)) {
+        lua_pushnil(L);
+        return LUA_TNIL;
+    }
+    lua_pushstring(L, key);
+    return lua_rawget(L, idx);
+}
+
+static int rawindex(lua_State *L, int idx, lua_Integer i)
+{
+    idx = lua_absindex(L, idx);
+    if (!lua_istable(L, idx)) {
+        lua_pushnil(L);
+        return LUA_TNIL;
+    }
+    return lua_rawgeti(L, idx, i);
+}
+
 /* The __ns_kind of the metatable of the value at idx ("shape", "material", ...), or "". */
 static const char *kind_of(lua_State *L, int idx, char *buf, size_t n)
 {
     buf[0] = '\0';
     if (lua_type(L, idx) != LUA_TTABLE || !lua_getmetatable(L, idx))
         return buf;
-    if (lua_getfield(L, -1, "__ns_kind") == LUA_TSTRING)
+    if (rawfield(L, -1, "__ns_kind") == LUA_TSTRING)
         snprintf(buf, n, "%s", lua_tostring(L, -1));
     lua_pop(L, 2);
     return buf;
@@ -108,7 +133,7 @@ static bool is_kind(lua_State *L, int idx, const char *kind)
 /* The table's `where` ("file:line"), or the fallback. */
 static void get_where(lua_State *L, int idx, const char *fallback, char *out, size_t n)
 {
-    if (lua_getfield(L, idx, "where") == LUA_TSTRING)
+    if (rawfield(L, idx, "where") == LUA_TSTRING)
         snprintf(out, n, "%s", lua_tostring(L, -1));
     else
         snprintf(out, n, "%s", fallback);
@@ -119,7 +144,7 @@ static int get_string(Builder *b, int idx, const char *key, const char *where, c
                       bool required, char **out)
 {
     lua_State *L = b->L;
-    int t = lua_getfield(L, idx, key);
+    int t = rawfield(L, idx, key);
     *out = NULL;
     if (t == LUA_TNIL && !required) {
         lua_pop(L, 1);
@@ -139,7 +164,7 @@ static int get_number(Builder *b, int idx, const char *key, const char *where, c
                       double *out)
 {
     lua_State *L = b->L;
-    int t = lua_getfield(L, idx, key);
+    int t = rawfield(L, idx, key);
     double x = lua_tonumber(L, -1);
     lua_pop(L, 1);
     if (t != LUA_TNUMBER || !isfinite(x))
@@ -153,12 +178,12 @@ static int get_vector(Builder *b, int idx, const char *key, int n, const char *w
                       const char *ctor, double *out)
 {
     lua_State *L = b->L;
-    if (lua_getfield(L, idx, key) != LUA_TTABLE) {
+    if (rawfield(L, idx, key) != LUA_TTABLE) {
         lua_pop(L, 1);
         return fail(b, "%s: %s: %s must be a list of %d numbers", where, ctor, key, n);
     }
     for (int i = 0; i < n; i++) {
-        int t = lua_geti(L, -1, i + 1);
+        int t = rawindex(L, -1, i + 1);
         out[i] = lua_tonumber(L, -1);
         lua_pop(L, 1);
         if (t != LUA_TNUMBER || !isfinite(out[i])) {
@@ -172,7 +197,7 @@ static int get_vector(Builder *b, int idx, const char *key, int n, const char *w
 
 static bool get_bool(lua_State *L, int idx, const char *key)
 {
-    lua_getfield(L, idx, key);
+    rawfield(L, idx, key);
     bool v = lua_toboolean(L, -1);
     lua_pop(L, 1);
     return v;
@@ -240,7 +265,7 @@ static int material_from_lua(Builder *b, int idx, const char *where, const char 
         return -1;
     }
     free(model);
-    int t = lua_getfield(L, idx, "membrane");
+    int t = rawfield(L, idx, "membrane");
     if (t == LUA_TTABLE) {
         int mi = lua_gettop(L);
         m->has_membrane = true;
@@ -346,13 +371,13 @@ static NsShape **shape_list(Builder *b, int idx, const char *key, const char *wh
 {
     lua_State *L = b->L;
     *n = 0;
-    if (lua_getfield(L, idx, key) != LUA_TTABLE) {
+    if (rawfield(L, idx, key) != LUA_TTABLE) {
         lua_pop(L, 1);
         fail(b, "%s: %s: %s must be a list of shapes", where, ctor, key);
         return NULL;
     }
     int li = lua_gettop(L);
-    lua_Integer count = luaL_len(L, li);
+    lua_Integer count = (lua_Integer)lua_rawlen(L, li);
     if (count < 1 || count > 1000000) {
         lua_pop(L, 1);
         fail(b, "%s: %s: needs at least one shape", where, ctor);
@@ -365,7 +390,7 @@ static NsShape **shape_list(Builder *b, int idx, const char *key, const char *wh
         return NULL;
     }
     for (lua_Integer i = 0; i < count; i++) {
-        lua_geti(L, li, i + 1);
+        rawindex(L, li, i + 1);
         kids[i] = shape_from_lua(b, -1, where, ctor, depth + 1);
         lua_pop(L, 1);
         if (!kids[i]) {
@@ -384,7 +409,7 @@ static NsShape **shape_list(Builder *b, int idx, const char *key, const char *wh
 static NsShape *shape_field(Builder *b, int idx, const char *key, const char *where,
                             const char *ctor, int depth)
 {
-    lua_getfield(b->L, idx, key);
+    rawfield(b->L, idx, key);
     NsShape *s = shape_from_lua(b, -1, where, ctor, depth + 1);
     lua_pop(b->L, 1);
     return s;
@@ -415,7 +440,7 @@ static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const
     }
     char where[WHERE_MAX], type[32];
     get_where(L, idx, ctx_where, where, sizeof where);
-    if (lua_getfield(L, idx, "type") == LUA_TSTRING)
+    if (rawfield(L, idx, "type") == LUA_TSTRING)
         snprintf(type, sizeof type, "%s", lua_tostring(L, -1));
     else
         type[0] = '\0';
@@ -550,7 +575,7 @@ static int build_box(Builder *b, int ti, const char *where)
     NsRegionInfo *reg = &sc->regions[0];
     reg->name = dup_string("tissue");
     reg->tag = 1;
-    lua_getfield(L, ti, "material");
+    rawfield(L, ti, "material");
     int rc = material_from_lua(b, -1, where, ctor, &reg->material);
     lua_pop(L, 1);
     if (rc)
@@ -560,10 +585,10 @@ static int build_box(Builder *b, int ti, const char *where)
 
     /* Which faces are held. */
     bool fixed_face[6] = {false};
-    if (lua_getfield(L, ti, "fixed_faces") == LUA_TTABLE) {
-        lua_Integer n = luaL_len(L, -1);
+    if (rawfield(L, ti, "fixed_faces") == LUA_TTABLE) {
+        lua_Integer n = (lua_Integer)lua_rawlen(L, -1);
         for (lua_Integer i = 1; i <= n; i++) {
-            lua_geti(L, -1, i);
+            rawindex(L, -1, i);
             const char *f = lua_tostring(L, -1);
             int k = 0;
             while (k < 6 && !(f && strcmp(f, face_names[k]) == 0))
@@ -632,14 +657,14 @@ static int build_shapes(Builder *b, int ti, const char *where)
         return fail(b, "%s: %s: resolution must be > 0", where, ctor);
     sc->resolution = h;
 
-    if (lua_getfield(L, ti, "bounds") == LUA_TTABLE) {
+    if (rawfield(L, ti, "bounds") == LUA_TTABLE) {
         int bi = lua_gettop(L);
-        lua_geti(L, bi, 1);
-        lua_geti(L, bi, 2);
+        rawindex(L, bi, 1);
+        rawindex(L, bi, 2);
         b->have_bounds = lua_istable(L, -2) && lua_istable(L, -1);
         for (int a = 0; b->have_bounds && a < 3; a++) {
-            lua_geti(L, -2, a + 1);
-            lua_geti(L, -2, a + 1);
+            rawindex(L, -2, a + 1);
+            rawindex(L, -2, a + 1);
             b->blo[a] = lua_tonumber(L, -2);
             b->bhi[a] = lua_tonumber(L, -1);
             lua_pop(L, 2);
@@ -657,12 +682,12 @@ static int build_shapes(Builder *b, int ti, const char *where)
     }
     lua_pop(L, 1);
 
-    if (lua_getfield(L, ti, "regions") != LUA_TTABLE) {
+    if (rawfield(L, ti, "regions") != LUA_TTABLE) {
         lua_pop(L, 1);
         return fail(b, "%s: %s: regions must be a list of regions", where, ctor);
     }
     int ri = lua_gettop(L);
-    lua_Integer n = luaL_len(L, ri);
+    lua_Integer n = (lua_Integer)lua_rawlen(L, ri);
     if (n < 1 || n > 65535) {
         lua_pop(L, 1);
         return fail(b, "%s: %s: regions must be a list of 1 to 65535 regions", where, ctor);
@@ -681,7 +706,7 @@ static int build_shapes(Builder *b, int ti, const char *where)
     for (lua_Integer i = 0; i < n && rc == 0; i++) {
         char rctx[96];
         snprintf(rctx, sizeof rctx, "%s: regions[%d]", ctor, (int)(i + 1));
-        lua_geti(L, ri, i + 1);
+        rawindex(L, ri, i + 1);
         int gi = lua_gettop(L);
         NsRegionInfo *reg = &sc->regions[i];
         reg->tag = (int)i + 1;
@@ -690,7 +715,7 @@ static int build_shapes(Builder *b, int ti, const char *where)
         } else {
             rc = get_string(b, gi, "name", where, rctx, true, &reg->name);
             if (rc == 0) {
-                lua_getfield(L, gi, "material");
+                rawfield(L, gi, "material");
                 rc = material_from_lua(b, -1, where, rctx, &reg->material);
                 lua_pop(L, 1);
             }
@@ -761,6 +786,14 @@ static int build_file(Builder *b, int ti, const char *where)
         return fail(b, "%s: %s: cannot open '%s': %s", where, ctor, sc->mesh_path, strerror(errno));
     if (S_ISDIR(st.st_mode))
         return fail(b, "%s: %s: cannot open '%s': Is a directory", where, ctor, sc->mesh_path);
+    /* A FIFO would block for ever and /dev/zero never end: regular files of a bounded size
+     * only (sim/ns_limits.h; the reader checks again on the descriptor it opens). */
+    if (!S_ISREG(st.st_mode))
+        return fail(b, "%s: %s: cannot read '%s': not a regular file", where, ctor, sc->mesh_path);
+    if ((long long)st.st_size > NS_LIMIT_MESH_FILE_BYTES)
+        return fail(b, "%s: %s: '%s' has %lld bytes, more than a mesh file may have (%lld)", where,
+                    ctor, sc->mesh_path, (long long)st.st_size,
+                    (long long)NS_LIMIT_MESH_FILE_BYTES);
     char merr[512];
     if (ns_mesh_read_msh(sc->mesh_path, &sc->mesh, merr, (int)sizeof merr) != 0)
         return fail(b, "%s: %s: %s", where, ctor, merr);
@@ -792,9 +825,9 @@ static int build_file(Builder *b, int ti, const char *where)
         return -1;
     }
 
-    lua_getfield(L, ti, "regions");
-    lua_getfield(L, ti, "names");
-    lua_getfield(L, ti, "fixed");
+    rawfield(L, ti, "regions");
+    rawfield(L, ti, "names");
+    rawfield(L, ti, "fixed");
     int regions_i = lua_gettop(L) - 2, names_i = regions_i + 1, fixed_i = regions_i + 2;
     int rc = 0;
     if (!lua_istable(L, regions_i))
@@ -805,7 +838,7 @@ static int build_file(Builder *b, int ti, const char *where)
         reg->tag = tag;
         char rctx[64];
         snprintf(rctx, sizeof rctx, "%s: regions[%d]", ctor, tag);
-        if (lua_geti(L, regions_i, tag) == LUA_TNIL) {
+        if (rawindex(L, regions_i, tag) == LUA_TNIL) {
             rc = fail(b,
                       "%s: %s: '%s' has tets with physical tag %d but regions has no entry "
                       "for it (add [%d] = <material>)",
@@ -816,7 +849,7 @@ static int build_file(Builder *b, int ti, const char *where)
         lua_pop(L, 1);
         if (rc)
             break;
-        if (lua_istable(L, names_i) && lua_geti(L, names_i, tag) == LUA_TSTRING)
+        if (lua_istable(L, names_i) && rawindex(L, names_i, tag) == LUA_TSTRING)
             reg->name = dup_string(lua_tostring(L, -1));
         else
             reg->name = dup_string(reg->material.name);
@@ -825,7 +858,7 @@ static int build_file(Builder *b, int ti, const char *where)
         if (!reg->name)
             rc = fail(b, "%s: out of memory", where);
         if (lua_istable(L, fixed_i)) {
-            lua_geti(L, fixed_i, tag);
+            rawindex(L, fixed_i, tag);
             reg->fixed = lua_toboolean(L, -1);
             lua_pop(L, 1);
         }
@@ -871,7 +904,7 @@ static int build_tissue(Builder *b, int si)
 {
     lua_State *L = b->L;
     NsScenario *sc = b->sc;
-    lua_getfield(L, si, "tissue");
+    rawfield(L, si, "tissue");
     int ti = lua_gettop(L);
     if (!is_kind(L, ti, "tissue")) {
         lua_pop(L, 1);
@@ -883,7 +916,7 @@ static int build_tissue(Builder *b, int si)
     char where[WHERE_MAX], type[16] = "";
     get_where(L, ti, sc->where, where, sizeof where);
     sc->tissue_where = dup_string(where);
-    if (lua_getfield(L, ti, "type") == LUA_TSTRING)
+    if (rawfield(L, ti, "type") == LUA_TSTRING)
         snprintf(type, sizeof type, "%s", lua_tostring(L, -1));
     lua_pop(L, 1);
     int rc;
@@ -963,6 +996,60 @@ static int check_sets(Builder *b, const char *const *sets, int nsets)
     return rc;
 }
 
+/* What ns_scenario_load_set does inside one protected call. */
+typedef struct LoadIO {
+    Builder *b;
+    const char *path;
+    const char *const *sets;
+    int nsets;
+    int rc; /* out: 0, or -1 with b->err filled */
+} LoadIO;
+
+/* (io) -> (): runs the scenario file and builds its tissue. It runs as a protected call, so a
+ * Lua error raised anywhere in it (out of memory in a push, say) comes back as a message, not
+ * as a panic; everything it allocates is owned by the scenario or by the Builder, which the
+ * caller frees either way. */
+static int load_body(lua_State *L)
+{
+    LoadIO *io = lua_touserdata(L, 1);
+    lua_settop(L, 0);
+    Builder *b = io->b;
+    NsScenario *sc = b->sc;
+    push_sets(L, io->sets, io->nsets);
+    if (ns_lua_run_scenario(sc->lua, io->path, b->err, b->err_sz) != 0) {
+        io->rc = -1;
+        return 0;
+    }
+    int si = lua_gettop(L);
+    int rc = 0;
+    if (!is_kind(L, si, "scenario")) {
+        rc =
+            fail(b, "%s: the scenario file must return ns.scenario{...} (it returned %s)", io->path,
+                 lua_isnil(L, si)     ? "nothing"
+                 : lua_istable(L, si) ? "a plain table: wrap it in ns.scenario{...}"
+                                      : luaL_typename(L, si));
+    }
+    if (rc == 0) {
+        char where[WHERE_MAX];
+        get_where(L, si, io->path, where, sizeof where);
+        sc->where = dup_string(where);
+        rc = sc->where ? get_string(b, si, "name", where, "ns.scenario", true, &sc->name)
+                       : fail(b, "needlesim: out of memory");
+    }
+    if (rc == 0)
+        rc = get_string(b, si, "description", sc->where, "ns.scenario", false, &sc->description);
+    if (rc == 0)
+        rc = check_sets(b, io->sets, io->nsets);
+    if (rc == 0)
+        rc = build_tissue(b, si);
+    if (rc == 0) {
+        lua_pushvalue(L, si);
+        sc->table_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    }
+    io->rc = rc;
+    return 0;
+}
+
 int ns_scenario_load_set(const char *path, const char *const *sets, int nsets, NsScenario *sc,
                          char *err, int err_sz)
 {
@@ -971,7 +1058,6 @@ int ns_scenario_load_set(const char *path, const char *const *sets, int nsets, N
     ns_mesh_init(&sc->mesh);
     sc->table_ref = LUA_NOREF;
     Builder b = {.sc = sc, .err = err, .err_sz = err_sz};
-    int rc = 0;
 
     sc->path = dup_string(path);
     sc->lua = ns_lua_open(path, err, err_sz);
@@ -983,30 +1069,12 @@ int ns_scenario_load_set(const char *path, const char *const *sets, int nsets, N
     }
     lua_State *L = ns_lua_state(sc->lua);
     b.L = L;
-    push_sets(L, sets, nsets);
-    if (ns_lua_run_scenario(sc->lua, path, err, err_sz) != 0) {
-        ns_scenario_free(sc);
-        return -1;
-    }
-    int si = lua_gettop(L);
-    if (!is_kind(L, si, "scenario")) {
-        rc = fail(&b, "%s: the scenario file must return ns.scenario{...} (it returned %s)", path,
-                  lua_isnil(L, si)     ? "nothing"
-                  : lua_istable(L, si) ? "a plain table: wrap it in ns.scenario{...}"
-                                       : luaL_typename(L, si));
-    }
-    if (rc == 0) {
-        char where[WHERE_MAX];
-        get_where(L, si, path, where, sizeof where);
-        sc->where = dup_string(where);
-        rc = get_string(&b, si, "name", where, "ns.scenario", true, &sc->name);
-    }
-    if (rc == 0)
-        rc = get_string(&b, si, "description", sc->where, "ns.scenario", false, &sc->description);
-    if (rc == 0)
-        rc = check_sets(&b, sets, nsets);
-    if (rc == 0)
-        rc = build_tissue(&b, si);
+    int top = lua_gettop(L);
+    LoadIO io = {.b = &b, .path = path, .sets = sets, .nsets = nsets, .rc = -1};
+    lua_pushcfunction(L, load_body);
+    lua_pushlightuserdata(L, &io);
+    int rc = ns_lua_call(sc->lua, 1, 0, err, err_sz) != 0 ? -1 : io.rc;
+    lua_settop(L, top);
 
     /* Function shapes are not needed after meshing (later stages will keep their own). */
     for (int i = 0; i < b.nfns; i++) {
@@ -1019,9 +1087,6 @@ int ns_scenario_load_set(const char *path, const char *const *sets, int nsets, N
         ns_scenario_free(sc);
         return -1;
     }
-    lua_pushvalue(L, si);
-    sc->table_ref = luaL_ref(L, LUA_REGISTRYINDEX);
-    lua_settop(L, si - 1);
     sc->build_ms = now_ms() - t0;
     return 0;
 }

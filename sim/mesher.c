@@ -14,6 +14,7 @@
  * choice (edge identity, quad diagonals, visiting order) is a function of those integers. Only
  * the cut positions, the warped positions and the label function are floating point. */
 #include "mesher.h"
+#include "ns_limits.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -39,7 +40,11 @@ enum { OUTSIDE = -1 };
 #define NS_ALPHA2_LONG          0.21509
 #define NS_ALPHA2_SHORT         0.35900
 #define NS_MAX_LATTICE_VERTICES 50000000LL
-#define NS_BISECTION_STEPS      40
+/* Peak bytes a lattice vertex costs, the mesh built from it included: 513 measured on a 0.1 m
+ * gel box at 1.4 mm (827,099 lattice vertices, 4.4 million tets, 415 MB peak resident for
+ * `needlesim check`), rounded up. */
+#define NS_MESHER_BYTES_PER_VERTEX 560.0
+#define NS_BISECTION_STEPS         40
 
 NsMesherDef ns_default_mesher_def(void)
 {
@@ -976,10 +981,18 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
         count *= n + 3;
     }
     count += (double)c->nz[0] * c->nz[1] * c->nz[2];
-    if (count > (double)NS_MAX_LATTICE_VERTICES) {
+    /* The memory the mesh will take, estimated before anything is allocated (sim/ns_limits.h):
+     * the lattice's arrays, the cut-point table and the output mesh come to about
+     * NS_MESHER_BYTES_PER_VERTEX a lattice vertex (measured: docs/mesher.md). The spacing that
+     * would fit scales with the cube root. */
+    double bytes = count * NS_MESHER_BYTES_PER_VERTEX;
+    if (count > (double)NS_MAX_LATTICE_VERTICES || bytes > (double)NS_LIMIT_MESHER_BYTES) {
+        double fit = h * cbrt(bytes / (double)NS_LIMIT_MESHER_BYTES) * 1.02;
         ns_set_err(err, err_sz,
-                   "mesher: lattice too large (%.0f vertices, limit %lld): increase the spacing",
-                   count, NS_MAX_LATTICE_VERTICES);
+                   "mesher: spacing %g m needs %.0f lattice vertices, about %.1f GiB (at most "
+                   "%.1f GiB): a spacing of %.2g m or more fits",
+                   h, count, bytes / 1073741824.0, (double)NS_LIMIT_MESHER_BYTES / 1073741824.0,
+                   fit);
         return -1;
     }
     c->h = h;

@@ -21,6 +21,10 @@
 /* One twist angle (act.twist{angle}, a live {"twist": rad}) [rad]: 100 turns. */
 #define NS_LIMIT_TWIST_ANGLE 628.0
 
+/* Nodes of the needle's rod after a reparameterization (§3.4.2): a rod of 0.3 m at the finest
+ * edge any scenario uses (0.1 mm) has 3,000. */
+#define NS_LIMIT_ROD_NODES 10000
+
 /* ---- time --------------------------------------------------------------------------------- */
 
 /* The time step dt [s]: above this the coupled step's Newmark update is far outside what any
@@ -39,18 +43,20 @@
 
 /* Lua VM instructions for loading a scenario (the file, its modules, its shape functions as
  * the mesher calls them), all together. */
-#define NS_LIMIT_LOAD_INSTRUCTIONS 2000000000LL
+#define NS_LIMIT_LOAD_INSTRUCTIONS 500000000LL
 /* Lua VM instructions for the whole of a run's script and on_tick calls, all together. */
-#define NS_LIMIT_RUN_INSTRUCTIONS 20000000000LL
+#define NS_LIMIT_RUN_INSTRUCTIONS 5000000000LL
 /* Memory one scenario's Lua state may hold [bytes]. */
 #define NS_LIMIT_LUA_MEMORY ((size_t)1 << 30)
 /* Wall-clock time loading a scenario may take, meshing included [s]. */
 #define NS_LIMIT_LOAD_SECONDS 60.0
 /* The string library's pattern functions (find, match, gmatch, gsub): longest subject and
- * pattern [bytes], and the instructions each call is charged per subject byte scanned per
- * pattern item (backtracking is C code the instruction hook never sees). */
+ * pattern [bytes]; the worst-case work of a call is estimated before it runs and charged to the
+ * budget (backtracking is C code the instruction hook never sees). */
 #define NS_LIMIT_PATTERN_SUBJECT 65536
-#define NS_LIMIT_PATTERN_LENGTH 256
+#define NS_LIMIT_PATTERN_LENGTH  256
+/* Matching steps a pattern call may need in the worst case (about a second of C). */
+#define NS_LIMIT_PATTERN_WORK 1e8
 
 /* ---- files -------------------------------------------------------------------------------- */
 
@@ -65,7 +71,7 @@
 
 /* Memory the mesher may plan to use [bytes], estimated from the lattice before it allocates;
  * past it the message states the coarsest resolution that would fit. */
-#define NS_LIMIT_MESHER_BYTES ((long long)4 << 30)
+#define NS_LIMIT_MESHER_BYTES ((long long)2 << 30)
 
 /* ---- names -------------------------------------------------------------------------------- */
 

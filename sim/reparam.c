@@ -14,6 +14,7 @@
 
 #include "akima.h"
 #include "rod.h"
+#include "ns_limits.h"
 #include "rod_internal.h"
 
 /* Linear interpolation of the n points (xs, ys) (stride ys_stride) at xq, clamped at the ends. */
@@ -236,10 +237,15 @@ int ns_rod_reparameterize(NsRod *r, NsRodStats *stats)
          * never split. */
         if (j < first || !(r->rest_len[j] > split) || (r->pinned[j] && r->pinned[j + 1]))
             continue;
-        while (r->rest_len[j] / pieces[j] > split) /* runs at least once: at least 2 pieces */
-            pieces[j] *= 2;
+        while (r->rest_len[j] / pieces[j] > split && pieces[j] < NS_LIMIT_ROD_NODES)
+            pieces[j] *= 2; /* runs at least once: at least 2 pieces */
         splits += pieces[j] - 1;
         m += pieces[j] - 1;
+        if (m > NS_LIMIT_ROD_NODES) { /* bounded by construction, whatever the speed asked */
+            free(keep);
+            free(pieces);
+            return -1;
+        }
     }
     for (int j = first; j < ne && m > 3; j++) {
         if (!(r->rest_len[j] < merge) || pieces[j] > 1 || !keep[j] || !keep[j + 1])

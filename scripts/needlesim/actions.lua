@@ -62,6 +62,13 @@ local STALL_TIME = 2
 local CLEAR = 2e-3
 
 local function GT0(x) return x > 0 end
+-- Controls are bounded physically (sim.limits, from sim/ns_limits.h; docs/reliability.md).
+local function speed_ok(x) return x > 0 and x <= sim.limits.insert_speed end
+local function spin_ok(x) return math.abs(x) <= sim.limits.twist_rate end
+local function rate_ok(x) return x > 0 and x <= sim.limits.twist_rate end
+local function angle_ok(x) return math.abs(x) <= sim.limits.twist_angle end
+local function speed_what() return fmt("in (0, %g] [m/s]", sim.limits.insert_speed) end
+local function rate_what() return fmt("in (0, %g] [rad/s]", sim.limits.twist_rate) end
 local function GE0(x) return x >= 0 end
 local function ANY() return true end
 
@@ -135,12 +142,13 @@ end
 function act.insert(t)
     running()
     fields(t, "insert", { "speed", "depth", "to", "spin" })
-    local speed = number(t, "insert", "speed", GT0, "> 0 [m/s]")
+    local speed = number(t, "insert", "speed", speed_ok, speed_what())
     if t.depth ~= nil then
         number(t, "insert", "depth", GT0, "> 0 [m]")
     end
     local togo = goal(t, "insert")
-    local spin = number(t, "insert", "spin", ANY, "[rad/s]", 0)
+    local spin = number(t, "insert", "spin", spin_ok,
+        fmt("in [-%g, %g] [rad/s]", sim.limits.twist_rate, sim.limits.twist_rate), 0)
     local watch = stall_watch("act.insert: the needle does not advance", 1, sim.depth + togo())
     while togo() > 0 do
         sim.control.v_insert = speed
@@ -159,7 +167,7 @@ end
 function act.retract(t)
     running()
     fields(t, "retract", { "speed", "depth", "to" })
-    local speed = number(t, "retract", "speed", GT0, "> 0 [m/s]")
+    local speed = number(t, "retract", "speed", speed_ok, speed_what())
     local depth = number(t, "retract", "depth", GE0, ">= 0 [m]", -1)
     local togo = goal(t, "retract")
     local out = depth < 0 and t.to == nil
@@ -179,8 +187,9 @@ end
 function act.twist(t)
     running()
     fields(t, "twist", { "angle", "rate" })
-    local angle = number(t, "twist", "angle", ANY, "[rad]")
-    local rate = number(t, "twist", "rate", GT0, "> 0 [rad/s]", math.pi)
+    local angle = number(t, "twist", "angle", angle_ok,
+        fmt("in [-%g, %g] [rad]", sim.limits.twist_angle, sim.limits.twist_angle))
+    local rate = number(t, "twist", "rate", rate_ok, rate_what(), math.pi)
     local turned, sign = 0, angle < 0 and -1 or 1
     while turned < math.abs(angle) - 1e-12 do
         local w = math.min(rate, (math.abs(angle) - turned) / sim.dt)
@@ -221,7 +230,7 @@ function act.aim(t)
     if type(t.to) ~= "string" or sim.targets[t.to] == nil then
         error(fmt("act.aim: 'to' must name a target of the scenario (got %s)", tostring(t.to)), 2)
     end
-    local rate = number(t, "aim", "rate", GT0, "> 0 [rad/s]", math.pi)
+    local rate = number(t, "aim", "rate", rate_ok, rate_what(), math.pi)
     local within = number(t, "aim", "within", GT0, "> 0 [rad]", 0.2)
     local phi, off = bevel_offset(t.to)
     local steps = 0
@@ -255,9 +264,11 @@ function act.move_base(t)
     running()
     fields(t, "move_base", { "velocity", "time" })
     local v = t.velocity
-    if type(v) ~= "table" or #v ~= 3 or not (finite(v[1]) and finite(v[2]) and finite(v[3])) then
-        error(fmt("act.move_base: velocity must be {vx, vy, vz}: 3 finite numbers [m/s] (got %s)",
-            tostring(v)), 2)
+    local lim = sim.limits.base_speed
+    if type(v) ~= "table" or #v ~= 3 or not (finite(v[1]) and finite(v[2]) and finite(v[3]))
+        or math.abs(v[1]) > lim or math.abs(v[2]) > lim or math.abs(v[3]) > lim then
+        error(fmt("act.move_base: velocity must be {vx, vy, vz}: 3 finite numbers in [-%g, %g] "
+            .. "[m/s] (got %s)", lim, lim, tostring(v)), 2)
     end
     local time = number(t, "move_base", "time", GT0, "> 0 [s]")
     local n = math.floor(time / sim.dt + 0.5)

@@ -1,0 +1,3 @@
+local sc = require("base").scenario()
+sc.entry.point = { "a", {}, nil }
+return sc

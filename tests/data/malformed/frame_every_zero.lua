@@ -1,0 +1,3 @@
+local sc = require("base").scenario()
+sc.camera = { frame_every = 0 } -- set after the constructor checked the camera
+return sc
