@@ -2302,7 +2302,7 @@ int ns_cmd_bench(int argc, char **argv)
                    strcmp(a, "--solver") == 0 || strcmp(a, "--set") == 0 ||
                    strcmp(a, "--compare") == 0 || strcmp(a, "--repeat") == 0) {
             if (!v) {
-                fprintf(stderr, "needlesim bench: %s needs a value\n%s", a, bench_usage);
+                fprintf(stderr, "needlesim bench: %s needs a value (needlesim bench --help)\n", a);
                 return 2;
             }
             i++;
@@ -2312,8 +2312,8 @@ int ns_cmd_bench(int argc, char **argv)
                 if (k < 0) {
                     fprintf(stderr,
                             "needlesim bench: %s '%s': unknown solver (schur or "
-                            "paper)\n%s",
-                            a, v, bench_usage);
+                            "paper)\n",
+                            a, v);
                     return 2;
                 }
                 if (strcmp(a, "--solver") == 0)
@@ -2322,8 +2322,10 @@ int ns_cmd_bench(int argc, char **argv)
                     compare = k;
             } else if (strcmp(a, "--set") == 0) {
                 if (!strchr(v, '=') || v[0] == '=' || o.nsets == 32) {
-                    fprintf(stderr, "needlesim bench: --set '%s': expected KEY=VALUE\n%s", v,
-                            bench_usage);
+                    fprintf(stderr,
+                            "needlesim bench: --set '%s': expected KEY=VALUE (needlesim bench "
+                            "--help)\n",
+                            v);
                     return 2;
                 }
                 o.sets[o.nsets++] = v;
@@ -2333,8 +2335,10 @@ int ns_cmd_bench(int argc, char **argv)
                             : strcmp(a, "--repeat") == 0 ? BENCH_MAX_REPEAT
                                                          : 1000000;
                 if (*end || n < 1 || n > most) {
-                    fprintf(stderr, "needlesim bench: %s: expected an integer in [1, %ld]\n%s", a,
-                            most, bench_usage);
+                    fprintf(stderr,
+                            "needlesim bench: %s: expected an integer in [1, %ld] (needlesim bench "
+                            "--help)\n",
+                            a, most);
                     return 2;
                 }
                 if (strcmp(a, "--steps") == 0)
@@ -2345,23 +2349,24 @@ int ns_cmd_bench(int argc, char **argv)
                     o.threads = (int)n;
             }
         } else if (a[0] == '-' && a[1] != '\0') {
-            fprintf(stderr, "needlesim bench: unknown option '%s'\n%s", a, bench_usage);
+            fprintf(stderr, "needlesim bench: unknown option '%s' (needlesim bench --help)\n", a);
             return 2;
         } else if (!o.scenario) {
             o.scenario = a;
         } else {
-            fprintf(stderr, "needlesim bench: one scenario only (got '%s' too)\n%s", a,
-                    bench_usage);
+            fprintf(stderr,
+                    "needlesim bench: one scenario only (got '%s' too) (needlesim bench --help)\n",
+                    a);
             return 2;
         }
     }
     if (!o.scenario) {
-        fprintf(stderr, "needlesim bench: missing SCENARIO.lua\n%s", bench_usage);
+        fprintf(stderr, "needlesim bench: missing SCENARIO.lua (needlesim bench --help)\n");
         return 2;
     }
     if (compare >= 0 && compare == o.solver) {
-        fprintf(stderr, "needlesim bench: --compare %s: the same solver as the run's\n%s",
-                ns_coupled_solver_name((NsCoupledSolverKind)compare), bench_usage);
+        fprintf(stderr, "needlesim bench: --compare %s: the same solver as the run's\n",
+                ns_coupled_solver_name((NsCoupledSolverKind)compare));
         return 2;
     }
     if (o.steps == 0)

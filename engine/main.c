@@ -74,9 +74,8 @@ int main(int argc, char **argv)
     if (strcmp(cmd, "bench") == 0)
         return ns_cmd_bench(argc - 1, argv + 1);
     if (cmd[0] == '-')
-        fprintf(stderr, "needlesim: unknown option '%s'\n", cmd);
+        fprintf(stderr, "needlesim: unknown option '%s' (needlesim --help)\n", cmd);
     else
-        fprintf(stderr, "needlesim: unknown command '%s'\n", cmd);
-    fputs(usage, stderr);
+        fprintf(stderr, "needlesim: unknown command '%s' (needlesim --help)\n", cmd);
     return 2;
 }
