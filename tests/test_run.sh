@@ -235,7 +235,7 @@ bad script_error 's/act.wait { time = 0.2 }/act.wait { time = 0.2 }; no_such_act
 bad target_outside 's/at = { 0, 0, 0.03 }/at = { 0, 0, 0.3 }/' \
     "target_outside.lua:[0-9]+: ns.scenario: targets\[1\] 'target' .* outside the tissue"
 bad negative_speed 's/speed = 0.02, depth/speed = -0.02, depth/' \
-    "negative_speed.lua:[0-9]+: act.insert: speed must be a number > 0"
+    "negative_speed.lua:[0-9]+: act.insert: speed must be a number in \(0, 0.5\]"
 bad no_entry 's/^    entry = .*$//' "no_entry.lua:[0-9]+: ns.scenario: missing field 'entry'"
 bad bad_tolerance 's/tolerance = 2e-3/tolerance = -1/' \
     "bad_tolerance.lua:[0-9]+: ns.scenario: targets\[1\]: tolerance must be a number > 0"

@@ -128,8 +128,17 @@ local function goal(t, name)
         error(fmt("act.%s: 'to' must name a target of the scenario (got %s; targets: %s)", name,
             tostring(to), #names > 0 and table.concat(names, ", ") or "none"), 3)
     end
+    -- A tip direction that reverses from one step to the next (soft tissue can fold the last
+    -- rod edge back for a step) is not believed: the last one that did not reverse is used, so
+    -- a one-step flip does not end the action early.
+    local last
     return function()
         local x, p, d = sim.targets[to], sim.tip, sim.tip_direction
+        if last and d[1] * last[1] + d[2] * last[2] + d[3] * last[3] < 0 then
+            d = last
+        else
+            last = { d[1], d[2], d[3] }
+        end
         return (x[1] - p[1]) * d[1] + (x[2] - p[2]) * d[2] + (x[3] - p[3]) * d[3]
     end
 end
