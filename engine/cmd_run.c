@@ -162,6 +162,12 @@ typedef struct Run {
         int target, hint;
     } * seeds;
     int seed_n, seed_cap;
+    /* physical outcomes (issue 32): the tip stopped at bone, the tip out through the surface */
+    struct Event {
+        double t, x[3];
+        int type, region; /* EVENT_*; bone: the region touched */
+    } * events;
+    int event_n, event_cap;
     /* obstacles: per obstacle, whether the needle entered it, when first, for how many steps,
      * where the tip was when it went in, and the deepest it got from there */
     struct Obstacle {
@@ -196,6 +202,38 @@ typedef struct Run {
     Series tips[3]; /* bench --compare: the tip after every step [m] */
     bool log_tips;
 } Run;
+
+enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT };
+static const char *const event_names[2] = {"bone_contact", "tip_exit"};
+
+/* Records what the step's statistics say happened at the tip (a bone contact's first step, an
+ * exit through the surface), at the step's end time. Returns 0, or -1 (memory). */
+static int record_events(Run *r, const NsCouplingStats *st, double t, const double tip[3])
+{
+    for (int type = 0; type < 2; type++) {
+        if (type == EVENT_BONE_CONTACT ? st->bone_contact != 1 : !st->tip_exit)
+            continue;
+        if (r->event_n == r->event_cap) {
+            int cap = r->event_cap ? 2 * r->event_cap : 8;
+            struct Event *e = realloc(r->events, (size_t)cap * sizeof *e);
+            if (!e)
+                return -1;
+            r->events = e;
+            r->event_cap = cap;
+        }
+        struct Event *e = &r->events[r->event_n++];
+        e->t = t;
+        e->type = type;
+        e->region = type == EVENT_BONE_CONTACT ? st->bone_region : -1;
+        memcpy(e->x, tip, sizeof e->x);
+    }
+    return 0;
+}
+
+static const char *event_region(const Run *r, const struct Event *e)
+{
+    return e->region >= 0 && e->region < r->sc.region_count ? r->sc.regions[e->region].name : "";
+}
 
 static double dot3(const double *a, const double *b)
 {
@@ -577,6 +615,28 @@ static int tick_body(lua_State *L)
     lua_rawset(L, si);
     lua_pushstring(L, "exited");
     lua_pushboolean(L, io->exited);
+    lua_rawset(L, si);
+    lua_pushstring(L, "bone_contact"); /* the tip rests on bone: the insertion stalls */
+    lua_pushboolean(L, r->c.tip_blocked);
+    lua_rawset(L, si);
+    lua_pushstring(L, "tip_exited"); /* the tip is out through the tissue's surface */
+    lua_pushboolean(L, r->c.params.remesh && r->c.path.through && !r->c.outside);
+    lua_rawset(L, si);
+    lua_pushstring(L, "events"); /* a fresh list every step: {t, type, tip, region} */
+    lua_createtable(L, r->event_n, 0);
+    for (int i = 0; i < r->event_n; i++) {
+        const struct Event *e = &r->events[i];
+        lua_createtable(L, 0, 4);
+        set_num(L, lua_gettop(L), "t", e->t);
+        lua_pushstring(L, event_names[e->type]);
+        lua_setfield(L, -2, "type");
+        set_vec(L, lua_gettop(L), "tip", e->x);
+        if (e->type == EVENT_BONE_CONTACT) {
+            lua_pushstring(L, event_region(r, e));
+            lua_setfield(L, -2, "region");
+        }
+        lua_rawseti(L, -2, i + 1);
+    }
     lua_rawset(L, si);
     lua_pushstring(L, "targets"); /* a fresh table every step */
     lua_newtable(L);
@@ -1208,6 +1268,27 @@ static int write_report(Run *r, const Results *res, uint64_t hash, char *err, in
     ns_json_key(&j, "duration_s");
     ns_json_number(&j, (double)r->steps * r->spec.dt);
     ns_json_end_object(&j);
+    ns_json_key(&j, "events");
+    ns_json_begin_array(&j);
+    for (int i = 0; i < r->event_n; i++) {
+        const struct Event *e = &r->events[i];
+        ns_json_begin_object(&j);
+        ns_json_key(&j, "t_s");
+        ns_json_number(&j, e->t);
+        ns_json_key(&j, "type");
+        ns_json_string(&j, event_names[e->type]);
+        ns_json_key(&j, "tip_m");
+        ns_json_begin_array(&j);
+        for (int k = 0; k < 3; k++)
+            ns_json_number(&j, e->x[k]);
+        ns_json_end_array(&j);
+        if (e->type == EVENT_BONE_CONTACT) {
+            ns_json_key(&j, "region");
+            ns_json_string(&j, event_region(r, e));
+        }
+        ns_json_end_object(&j);
+    }
+    ns_json_end_array(&j);
     ns_json_key(&j, "warnings");
     ns_json_begin_object(&j);
     ns_json_key(&j, "nan");
@@ -1755,14 +1836,18 @@ static int run_loop(Run *r, char *err, int err_sz)
                        "failed: %s (NaN %d, inverted %d, unconverged %d)",
                        r->sc.path, r->steps, t, 1e3 * tp[0], 1e3 * tp[1], 1e3 * tp[2],
                        1e3 * depth_of(r),
-                       outside ? "the needle tip left the tissue other than back through its "
-                                 "entry (exits through the far side are not modelled yet)"
+                       outside         ? "the needle tip left the tissue other than through its "
+                                         "entry or out through its surface"
                        : r->c.error[0] ? r->c.error
                                        : "the coupled step did not produce a valid state",
                        st.nan_count, st.inverted, st.unconverged);
             return -1;
         }
         r->steps++;
+        if (record_events(r, &st, (double)r->steps * sp->dt, tip_of(r))) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
         r->exited |= st.exited;
         r->inverted += st.inverted;
         r->repaired += st.remesh_repaired;
@@ -1860,6 +1945,7 @@ static void run_free(Run *r)
     free(r->marker_hint);
     free(r->obst);
     free(r->seeds);
+    free(r->events);
     free(r->traj_tmp);
     free(r->report_tmp);
     free(r->rec_tmp);

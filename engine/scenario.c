@@ -935,6 +935,15 @@ static int build_tissue(Builder *b, int si)
     lua_pop(L, 1);
     if (rc == 0)
         region_stats(sc);
+    /* Nothing held: the needle's push would carry the whole tissue away for as long as a
+     * script chased it (issue 32: a liver moved 4.9 m in 11 minutes). */
+    if (rc == 0 && sc->fixed_nodes == 0)
+        rc = fail(b,
+                  "%s: ns.tissue.%s: nothing holds the tissue in place (no fixed nodes), so the "
+                  "needle would push it away: hold it with fixed_faces = {\"zmax\", ...} on "
+                  "ns.tissue.box, fixed = true on a region of ns.tissue.shapes (bone), or fixed "
+                  "= {tag, ...} on ns.tissue.file",
+                  where, type);
     return rc;
 }
 

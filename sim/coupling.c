@@ -444,24 +444,31 @@ static void tip_dihedrals(const NsCoupled *c, NsCouplingStats *st)
  * the tip node's edges away (or the path's start). The world tangent of the rod's last edge is
  * no substitute: right after skin entry that edge is a tenth of an element long, and the strain
  * of the tissue around it tilts it by ten degrees or more. Returns 1, or 0 with no chord. */
-static int path_heading(const NsMesh *M, const NsNeedlePath *p, double heading[3])
+/* The mean material length of node n's edges (each counted once per tet) [m]; 0 with none. */
+static double node_edge_mean(const NsMesh *M, int n)
 {
-    int tipn = p->node[p->count - 1];
-    const double *ut = M->u + 3 * tipn;
-    const NsIntList *l = &M->node_tets[tipn];
+    const double *ut = M->u + 3 * n;
+    const NsIntList *l = &M->node_tets[n];
     double h = 0.0;
     int ne = 0;
     for (int i = 0; i < l->count; i++)
         for (int k = 0; k < 4; k++) {
             int o = M->tet_node[4 * l->items[i] + k];
-            if (o != tipn) {
+            if (o != n) {
                 double e[3] = {M->u[3 * o] - ut[0], M->u[3 * o + 1] - ut[1],
                                M->u[3 * o + 2] - ut[2]};
                 h += norm3(e);
                 ne++;
             }
         }
-    h = ne ? h / ne : 0.0;
+    return ne ? h / ne : 0.0;
+}
+
+static int path_heading(const NsMesh *M, const NsNeedlePath *p, double heading[3])
+{
+    int tipn = p->node[p->count - 1];
+    const double *ut = M->u + 3 * tipn;
+    double h = node_edge_mean(M, tipn);
     double d[3] = {0, 0, 0}, dn = 0.0;
     for (int j = p->count - 2; j >= 0 && !(dn >= h); j--) {
         for (int i = 0; i < 3; i++)
@@ -473,6 +480,147 @@ static int path_heading(const NsMesh *M, const NsNeedlePath *p, double heading[3
     for (int i = 0; i < 3; i++)
         heading[i] = d[i] / dn;
     return 1;
+}
+
+/* ---- physical outcomes at the tip (issue 32; docs/remeshing.md, "Bone contact and far-side
+ * exit") ---- */
+
+/* Is tet t rigid: every one of its nodes held in place (bone: a fixed region)? */
+static int tet_rigid(const NsMesh *M, int t)
+{
+    for (int k = 0; k < 4; k++)
+        if (!(M->flags[M->tet_node[4 * t + k]] & NS_NODE_FIXED))
+            return 0;
+    return 1;
+}
+
+/* The tip's tissue node while the tip rests on bone: held where it is (its DOFs fixed, at
+ * rest), so the needle's push does not drive it, and the soft layer between it and the bone,
+ * into the bone. Released (free again, unless the mesh fixes it) on withdrawal. */
+static void unpin_tip(NsCoupled *c)
+{
+    NsTissue *T = c->tissue;
+    int n = c->pinned_node - 1;
+    c->pinned_node = 0;
+    if (n < 0 || !ns_mesh_node_alive(&T->mesh, n) || (T->mesh.flags[n] & NS_NODE_FIXED))
+        return;
+    for (int k = 0; k < 3; k++)
+        ns_tissue_fix_dof(T, n, k, 0);
+}
+
+static void pin_tip(NsCoupled *c, int node)
+{
+    NsTissue *T = c->tissue;
+    if (c->pinned_node == node + 1)
+        return;
+    unpin_tip(c);
+    for (int k = 0; k < 3; k++) {
+        ns_tissue_fix_dof(T, node, k, 1);
+        T->mesh.v[3 * node + k] = 0.0;
+        T->mesh.a[3 * node + k] = 0.0;
+    }
+    c->pinned_node = node + 1;
+}
+
+/* Where the material segment a -> b first enters a rigid tet: sampled at most h/4 apart, the
+ * crossing bisected. Returns the fraction of the way along (0, 1], or -1 if it enters none;
+ * *region: that tet's region. */
+static double rigid_crossing(const NsMesh *M, const double a[3], const double b[3], double h,
+                             int hint, int *region)
+{
+    double d[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, len = norm3(d);
+    if (!(len > 0.0) || !(h > 0.0))
+        return -1.0;
+    int n = (int)ceil(len / (0.25 * h));
+    n = n < 1 ? 1 : n > 4096 ? 4096 : n;
+    for (int k = 1; k <= n; k++) {
+        double f = (double)k / n, q[3];
+        for (int i = 0; i < 3; i++)
+            q[i] = a[i] + f * d[i];
+        int t = ns_mesh_locate(M, q, hint, 1e-9, NULL);
+        if (t < 0)
+            continue;
+        hint = t;
+        if (!tet_rigid(M, t))
+            continue;
+        double lo = (double)(k - 1) / n, hi = f;
+        *region = M->tet_region[t];
+        for (int it = 0; it < 40; it++) {
+            double mid = 0.5 * (lo + hi);
+            for (int i = 0; i < 3; i++)
+                q[i] = a[i] + mid * d[i];
+            int tm = ns_mesh_locate(M, q, hint, 1e-9, NULL);
+            if (tm >= 0 && tet_rigid(M, tm)) {
+                hi = mid;
+                *region = M->tet_region[tm];
+            } else {
+                lo = mid;
+            }
+        }
+        return hi;
+    }
+    return -1.0;
+}
+
+/* The last point inside the deformed tissue on the world segment xa (inside) -> xb (outside),
+ * by bisection, as a material point u and the tet holding it. Returns the tet, or -1 when xa is
+ * not inside either. */
+static int world_exit_point(const NsMesh *M, const double xa[3], const double xb[3], int hint,
+                            double u[3])
+{
+    double b[4], bm[4], q[3];
+    int t = ns_mesh_locate_in(M, M->x, xa, hint, 1e-9, b);
+    if (t < 0)
+        return -1;
+    double lo = 0.0, hi = 1.0;
+    for (int it = 0; it < 50; it++) {
+        double mid = 0.5 * (lo + hi);
+        for (int i = 0; i < 3; i++)
+            q[i] = xa[i] + mid * (xb[i] - xa[i]);
+        int tm = ns_mesh_locate_in(M, M->x, q, t, 1e-9, bm);
+        if (tm >= 0) {
+            lo = mid;
+            t = tm;
+            memcpy(b, bm, sizeof b);
+        } else {
+            hi = mid;
+        }
+    }
+    for (int i = 0; i < 3; i++) {
+        u[i] = 0.0;
+        for (int k = 0; k < 4; k++)
+            u[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
+    }
+    return t;
+}
+
+/* A tip resting against bone without cutting (sticking, or pushed by the tissue): its node
+ * within a quarter of its mean edge length of a rigid region straight ahead along the needle's
+ * tip tangent (taken as a material direction, the tissue by the bone being held) is in contact
+ * too: pinned there, or the needle would carry it, and the soft layer in front of it, into the
+ * bone (inverting the tets between). Not for a needle being withdrawn. */
+static void bone_ahead(NsCoupled *c, NsCouplingStats *st)
+{
+    NsRod *r = c->rod;
+    NsMesh *M = &c->tissue->mesh;
+    NsNeedlePath *p = &c->path;
+    if (c->tip_blocked || p->through || c->outside || p->count < 2 || !(r->v_insert >= 0.0))
+        return;
+    int tipn = p->node[p->count - 1];
+    double tt[3], m1[3], m2[3], b[3], h = node_edge_mean(M, tipn);
+    ns_rod_tip_frame(r, tt, m1, m2);
+    double tn = norm3(tt);
+    if (!(tn > 0.0) || !(h > 0.0) || M->node_tets[tipn].count == 0)
+        return;
+    for (int i = 0; i < 3; i++)
+        b[i] = M->u[3 * tipn + i] + 0.25 * h * tt[i] / tn;
+    int region = -1;
+    if (rigid_crossing(M, M->u + 3 * tipn, b, h, M->node_tets[tipn].items[0], &region) < 0.0)
+        return;
+    st->bone_contact = 1;
+    st->bone_region = region;
+    c->tip_blocked = 1;
+    pin_tip(c, tipn);
 }
 
 /* Algorithm 2 at the tip (§3.4.1): the needle tip's world position, located in the deformed
@@ -491,10 +639,21 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     double b[4];
     int t = ns_mesh_locate_in(M, M->x, r->x + 3 * (r->nodes - 1), start, 1e-9, b);
     int retracting = c->state[r->nodes - 1] == NS_FRICTION_DYN_NEG;
-    if (t < 0 && !(retracting && p->count == 2))
-        return -1; /* the tip left the tissue elsewhere: not handled yet (docs/remeshing.md) */
     double u_new[3] = {0, 0, 0};
-    for (int k = 0; k < 4 && t >= 0; k++)
+    /* The tip left the tissue other than back through its entry: it goes out through the
+     * surface (issue 32). Its node is taken to where the needle crosses the surface, the
+     * boundary split there, and the needle goes on through (path.through): the part outside is
+     * free, the tip no longer cuts. */
+    int exiting = 0;
+    if (t < 0 && !(retracting && p->count == 2)) {
+        if (retracting)
+            return -1; /* drawn back out of the tissue elsewhere than at the entry: not modelled */
+        t = world_exit_point(M, M->x + 3 * tipn, r->x + 3 * (r->nodes - 1), start, u_new);
+        if (t < 0)
+            return -1;
+        exiting = 1;
+    }
+    for (int k = 0; k < 4 && t >= 0 && !exiting; k++)
         for (int i = 0; i < 3; i++)
             u_new[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
     if (retracting && p->count == 2) {
@@ -528,7 +687,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
      * the distance the tip advanced through the material. (m2 is a world direction; the tissue
      * around the tip is taken as locally unrotated for it.) */
     int bevel = r->params.tip == NS_TIP_BEVEL && c->params.bevel_model == NS_BEVEL_DISPLACEMENT &&
-                c->state[r->nodes - 1] == NS_FRICTION_DYN_POS;
+                c->state[r->nodes - 1] == NS_FRICTION_DYN_POS && !exiting;
     if (bevel) {
         double tt[3], m1[3], m2[3], d = 0.0;
         ns_rod_tip_frame(r, tt, m1, m2);
@@ -551,7 +710,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     double heading[3];
     if (arc && c->state[r->nodes - 1] == NS_FRICTION_DYN_NEG)
         c->heading_valid = 0;
-    arc = arc && c->state[r->nodes - 1] == NS_FRICTION_DYN_POS && t >= 0;
+    arc = arc && c->state[r->nodes - 1] == NS_FRICTION_DYN_POS && t >= 0 && !exiting;
     if (arc) {
         double tt[3], m1[3], m2[3], w[3], adv = 0.0, wn = 0.0;
         ns_rod_tip_frame(r, tt, m1, m2);
@@ -613,6 +772,37 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
             hn++;
         }
     double half = hn ? 0.5 * hsum / hn : INFINITY, dist = norm3(du);
+    /* Bone (issue 32): a cutting tip whose move enters a rigid region (every node of a tet
+     * fixed) stops at its surface, a tenth of the mean edge length short of it: bone is not cut.
+     * The needle rests on it (tip_blocked: the sleeve slips, ns_coupled_step) until it is
+     * withdrawn. */
+    int stopped = 0;
+    if (c->state[r->nodes - 1] == NS_FRICTION_DYN_POS && hn) {
+        int region = -1;
+        double f = rigid_crossing(M, u0, u_new, 2.0 * half, t, &region);
+        if (f >= 0.0) {
+            /* (A needle being withdrawn that springs forward onto the bone stops there too,
+             * but it is not a new contact.) */
+            stopped = 1 + (r->v_insert >= 0.0);
+            exiting = 0;
+            if (stopped == 2) {
+                st->bone_contact = c->tip_blocked ? 2 : 1;
+                st->bone_region = region;
+                c->tip_blocked = 1;
+            }
+            double go = f * dist - 0.2 * half;
+            if (!(go > 1e-3 * half)) { /* already at the surface: the tip stays */
+                if (stopped == 2)
+                    pin_tip(c, tipn);
+                return 0;
+            }
+            for (int i = 0; i < 3; i++) {
+                du[i] *= go / dist;
+                u_new[i] = u0[i] + du[i];
+            }
+            dist = go;
+        }
+    }
     int K = dist > half ? (int)ceil(dist / half) : 1;
     if (K > 64) {
         snprintf(c->error, sizeof c->error,
@@ -641,17 +831,34 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     for (int k = 0; k < len; k++)
         chain[k] = p->node[len - 1 - k];
     int penetrating = c->state[r->nodes - 1] == NS_FRICTION_DYN_POS, hint = t, rc = 0;
-    NsRemeshResult res;
+    NsRemeshResult res, good;
     memset(&res, 0, sizeof res);
+    memset(&good, 0, sizeof good);
+    good.tip = chain[0];
     char err[256];
     for (int sub = 1; sub <= K && rc == 0; sub++) {
         double us[3];
         for (int i = 0; i < 3; i++)
             us[i] = sub == K ? u_new[i] : u0[i] + du[i] * sub / K;
-        NsRemeshTip tip = {chain[0], chain[1], len > 2 ? chain[2] : -1,
-                           chain,    len,      penetrating,
-                           false,    hint,     c->params.remesh_dihedral_floor};
+        /* Only the exit's last piece may change the boundary (a node on the far surface). */
+        NsRemeshTip tip = {chain[0],
+                           chain[1],
+                           len > 2 ? chain[2] : -1,
+                           chain,
+                           len,
+                           penetrating,
+                           exiting && sub == K,
+                           hint,
+                           c->params.remesh_dihedral_floor};
         rc = ns_remesh_tip(M, &c->remesh, &tip, us, &res, err, sizeof err);
+        if (rc != 0 && (stopped || exiting)) {
+            /* Next to bone or at the surface no operation may place the tip there: it stays
+             * where the last piece put it (at bone, it stops a little shorter; at the exit,
+             * the needle goes through from that node). */
+            rc = 0;
+            res = good;
+            break;
+        }
         if (rc != 0) {
             snprintf(c->error, sizeof c->error, "%s", err);
             /* Scoring may have grown the mesh's slots even though nothing was accepted: the
@@ -660,6 +867,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
             ns_tissue_sync_topology(T, err2, sizeof err2);
             break;
         }
+        good = res;
         if (res.dropped) {
             chain[0] = res.tip;
             if (len > 2 && chain[1] == res.tip) {
@@ -700,7 +908,14 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
             memcpy(c->heading, heading, sizeof heading);
             c->heading_valid = 1;
         }
+        if (exiting) {
+            p->through = 1; /* the path ends at the surface; the tip is free beyond it */
+            c->heading_valid = 0;
+            st->tip_exit = 1;
+        }
         rc = ns_tissue_sync_topology(T, err, sizeof err);
+        if (rc == 0 && stopped == 2) /* after the sync, which frees a new node's DOFs */
+            pin_tip(c, res.tip);
     }
     free(chain);
     return rc;
@@ -754,14 +969,35 @@ static int reparameterize(NsCoupled *c, NsCouplingStats *st)
      * its edge. */
     st->tip_slide = 0.0;
     if (c->params.remesh) {
+        /* Through the far side (issue 32): drawn back until its tip is within a quarter of the
+         * needle's shortest edge of the exit node (or behind it), the needle's tip is at the
+         * exit again, and cuts or retracts from there as before. */
+        if (p->through && p->count >= 2) {
+            int pe = p->node[p->count - 1], pd = p->node[p->count - 2];
+            double t[3], d[3];
+            for (int k = 0; k < 3; k++) {
+                t[k] = M->x[3 * pe + k] - M->x[3 * pd + k];
+                d[k] = r->x[3 * (n - 1) + k] - M->x[3 * pe + k];
+            }
+            if (dot3(d, t) / norm3(t) < 0.25 * r->min_rest_edge) {
+                p->through = 0;
+                p->tip_s = p->s[p->count - 1];
+                st->tip_returned = 1;
+            }
+        }
         /* The tip's node follows the needle tip by remeshing (skipped while it sticks). */
-        if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC &&
-            remesh_tip(c, st))
+        if (!p->through && !st->tip_returned && c->ta[n - 1] >= 0 &&
+            c->state[n - 1] != NS_FRICTION_STATIC && remesh_tip(c, st))
             return -1;
         if (c->outside) { /* withdrawn: the needle keeps its solved shape, coupled nowhere */
             couple_from_path(c, 0, 0);
             return 0;
         }
+        /* Out through the far side this step: the needle's tip, outside, stays free beyond
+         * the exit node. */
+        if (st->tip_exit)
+            last = n - 2;
+        bone_ahead(c, st);
         tip_dihedrals(c, st);
     } else if (!p->through && c->ta[n - 1] >= 0 && c->state[n - 1] != NS_FRICTION_STATIC) {
         double xp[3], t[3], d[3];
@@ -1105,8 +1341,34 @@ static int step_failed(NsCoupled *c, const char *msg, int *iw, uint8_t *sw, NsCo
     return -1;
 }
 
+static int coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
+                        NsCouplingStats *stats);
+
+/* A needle whose tip rests on bone (tip_blocked) does not advance: the commanded insertion is
+ * not fed through the sleeve (the needle slips in the holder, as a hand's grip does when the
+ * tip meets bone), so the needle is not driven into it step after step. A withdrawal
+ * (v_insert < 0) takes it off the bone. */
 int ns_coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
                     NsCouplingStats *stats)
+{
+    NsRod *r = c->rod;
+    double v = r->v_insert;
+    if (v < 0.0 && c->tip_blocked) {
+        c->tip_blocked = 0;
+        unpin_tip(c);
+    }
+    int stall = c->tip_blocked && v > 0.0;
+    if (stall)
+        r->v_insert = 0.0;
+    int rc = coupled_step(c, dt, ext_tissue, ext_rod, stats);
+    r->v_insert = v;
+    if (stats)
+        stats->stalled = stall;
+    return rc;
+}
+
+static int coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const double *ext_rod,
+                        NsCouplingStats *stats)
 {
     NsCouplingStats st;
     memset(&st, 0, sizeof st);

@@ -148,6 +148,14 @@ typedef struct NsCouplingStats {
                             the tip's node (after skin entry: the entry's own surface split, if
                             it made one; beyond that, 0 when Algorithm 2 undid the rest) */
     double min_dihedral_deg, max_dihedral_deg;
+    /* remesh: physical outcomes (docs/remeshing.md, "Bone contact and far-side exit").
+     * bone_contact: the cutting tip met a rigid tissue region (every node of a tet fixed: bone)
+     * this step and was stopped at its surface: 1 on the first step of a contact, 2 on later
+     * steps of the same one; bone_region: that tet's region. stalled: the needle rested on it
+     * and the commanded insertion was not fed through the sleeve this step. tip_exit: the tip
+     * left the tissue through its surface this step (not back through its entry); tip_returned:
+     * a needle through the far side was drawn back in until its tip was at the exit again. */
+    int bone_contact, bone_region, stalled, tip_exit, tip_returned;
 } NsCouplingStats;
 
 typedef struct NsCoupled {
@@ -170,6 +178,10 @@ typedef struct NsCoupled {
     int outside;                /* params.remesh: the needle was withdrawn out of the tissue */
     double heading[3];          /* NS_BEVEL_ARC: the cut's unit heading in material space */
     int heading_valid;          /* 0: taken from the needle's tip tangent when it next cuts */
+    /* params.remesh: the tip rests on a rigid region (bone): a commanded insertion is not fed
+     * through the sleeve (it slips) until the needle is withdrawn (v_insert < 0) */
+    int tip_blocked;
+    int pinned_node; /* tip_blocked: 1 + the tip's tissue node, held where it met the bone */
     uint64_t steps;
     char error[256]; /* why the last failed ns_coupled_step failed ("" after a good step) */
 } NsCoupled;

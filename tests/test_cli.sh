@@ -412,6 +412,12 @@ expect_error "sandbox: os is absent" 1 "tests/data/sandbox_os.lua:2:" "global 'o
     check tests/data/sandbox_os.lua
 expect_error "scenario file returns no ns.scenario" 1 "tests/data/no_scenario.lua:" \
     "must return ns.scenario" -- check tests/data/no_scenario.lua
+expect_error "tissue with nothing fixed (check)" 1 \
+    "tests/data/nothing_fixed.lua:6: ns.tissue.box: nothing holds the tissue in place" \
+    "fixed_faces" "fixed = true" -- check tests/data/nothing_fixed.lua
+expect_error "tissue with nothing fixed (run)" 1 \
+    "tests/data/nothing_fixed.lua:6: ns.tissue.box: nothing holds the tissue in place" -- \
+    run tests/data/nothing_fixed.lua --no-render -o "$TMP/nothing_fixed"
 expect_error "nonexistent scenario path" 1 "cannot open 'tests/data/no_such_scenario.lua'" -- \
     check tests/data/no_such_scenario.lua
 

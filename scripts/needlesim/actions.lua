@@ -147,7 +147,9 @@ end
 -- `depth` [m] past the entry point (measured along the entry direction), or until it reaches
 -- the target named `to` where that target is now (image guidance: the tissue the needle pushes
 -- carries the target deeper), the base turning at `spin` [rad/s] meanwhile (default 0; spinning
--- a bevel needle as it goes in averages its bend away).
+-- a bevel needle as it goes in averages its bend away). Returns true, or false when the tip met
+-- bone (a fixed region) first: it stops at the bone's surface and the insertion ends there
+-- (sim.bone_contact; the report's events say when and where).
 function act.insert(t)
     running()
     fields(t, "insert", { "speed", "depth", "to", "spin" })
@@ -159,13 +161,20 @@ function act.insert(t)
     local spin = number(t, "insert", "spin", spin_ok,
         fmt("in [-%g, %g] [rad/s]", sim.limits.twist_rate, sim.limits.twist_rate), 0)
     local watch = stall_watch("act.insert: the needle does not advance", 1, sim.depth + togo())
+    -- A tip that meets bone (a fixed region) stops there: the insertion ends early and the
+    -- action returns false (sim.bone_contact; the report's events say when and where).
     while togo() > 0 do
+        if sim.bone_contact then
+            stop()
+            return false
+        end
         sim.control.v_insert = speed
         sim.control.twist_rate = spin
         tick()
         watch()
     end
     stop()
+    return true
 end
 
 --- act.retract{speed, depth | to}: pull the needle back at `speed` [m/s] until its tip is `depth`

@@ -4,7 +4,7 @@ local M = {}
 
 function M.block(resolution)
     return ns.tissue.box { size = { 0.02, 0.02, 0.012 }, resolution = resolution,
-        material = ns.materials.gel }
+        material = ns.materials.gel, fixed_faces = { "zmin" } }
 end
 
 return M

@@ -3,5 +3,6 @@
 local ns = require "needlesim"
 return ns.scenario {
   name = "huge tag",
-  tissue = ns.tissue.file { path = "huge_tag.msh", regions = { [2147483647] = ns.materials.gel } },
+  tissue = ns.tissue.file { path = "huge_tag.msh", regions = { [2147483647] = ns.materials.gel },
+    fixed = { 2147483647 } },
 }
