@@ -9,6 +9,7 @@
 
 #include "err.h"
 #include "mesh.h"
+#include "names.h"
 #include "remesh.h"
 
 /* t[key] without metamethods (pushed; its type returned): a scenario may put metatables on
@@ -327,6 +328,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     lua_settop(L, si);
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
+    rc = rc ? rc : ns_names_check_run(sc, spec, err, err_sz); /* names.h: CSV- and JSON-safe */
     lua_settop(L, top);
     if (rc)
         ns_run_spec_free(spec);

@@ -321,6 +321,19 @@ bad negative_speed 's/speed = 0.02, depth/speed = -0.02, depth/' \
 bad no_entry 's/^    entry = .*$//' "no_entry.lua:[0-9]+: ns.scenario: missing field 'entry'"
 bad bad_tolerance 's/tolerance = 2e-3/tolerance = -1/' \
     "bad_tolerance.lua:[0-9]+: ns.scenario: targets\[1\]: tolerance must be a number > 0"
+# Names that would break trajectory.csv's header or a log line (engine/names.h): refused by
+# ns.scenario with the script's line, and again by the engine when a scenario edits its table.
+NAME_RULE="name must be 1 to 64 bytes of printable ASCII without ',', '\"' or '\\\\' \(spaces are fine\)"
+bad name_comma 's/{ name = "target", at/{ name = "tar,get", at/' \
+    "name_comma.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE \(got 'tar,get': byte 4 is ','\)"
+bad name_newline 's/{ name = "target", at/{ name = "tar\\nget", at/' \
+    "name_newline.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE \(got 'tar\?get': byte 4 is 0x0a\)"
+bad name_marker 's/^    targets = {$/    markers = { { name = "m\\"1", at = { 0, 0, 0.01 } } }, targets = {/' \
+    "name_marker.lua:[0-9]+: ns.scenario: markers\[1\]: $NAME_RULE \(got 'm\"1': byte 2 is '\"'\)"
+bad name_long "s/{ name = \"target\", at/{ name = \"$(printf 'x%.0s' $(seq 65))\", at/" \
+    "name_long.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE .*it is 65 bytes long"
+bad name_edited 's/^return ns.scenario {$/local sc = ns.scenario {/; $a sc.targets[1].name = "a\\nb"; return sc' \
+    "name_edited.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE \(got 'a\?b': byte 2 is 0x0a\)"
 # Errors that only show while running: the output folder is then created, so the check that no
 # report.json is left (and that an earlier run's is gone) can fail. The runs draw frames and a
 # video too: none of them (nor their temporary names) may be left either.
