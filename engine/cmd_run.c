@@ -1963,7 +1963,8 @@ int ns_cmd_run(int argc, char **argv)
     /* The scenario file's identity, which a log carries and a replay checks (control_log.h). */
     uint64_t sc_hash = 0;
     if (rc == 0 && (r.opt.replay || r.opt.record))
-        rc = ns_file_hash(r.opt.scenario, NS_LIMIT_SCRIPT_FILE_BYTES, &sc_hash, err, sizeof err);
+        rc = ns_file_hash(r.opt.scenario, NS_LIMIT_SCRIPT_FILE_BYTES, "scenario file", &sc_hash,
+                          err, sizeof err);
     if (rc == 0 && r.opt.replay)
         rc = ns_control_log_read(r.opt.replay, r.spec.dt, &r.replay, err, sizeof err);
     if (rc == 0 && r.opt.replay)

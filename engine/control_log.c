@@ -26,10 +26,11 @@ bool ns_control_log_id_ok(const char *id)
            strspn(id, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-") == n;
 }
 
-/* A name as one line of a log or a message: control characters and DEL as '?'. */
+/* A name as one line of a log: control characters and DEL as '?', at most 200 bytes (a
+ * reader takes lines of up to 1023). */
 static void put_name(FILE *f, const char *s)
 {
-    for (; *s; s++)
+    for (int n = 0; *s && n < 200; s++, n++)
         fputc((unsigned char)*s < 0x20 || *s == 0x7f ? '?' : *s, f);
 }
 
@@ -50,9 +51,10 @@ void ns_control_log_write_header(FILE *f, const NsLogProvenance *prov, const cha
     fputs(NS_CONTROL_LOG_HEADER "\n", f);
 }
 
-int ns_file_hash(const char *path, long long max_bytes, uint64_t *hash, char *err, int err_sz)
+int ns_file_hash(const char *path, long long max_bytes, const char *what, uint64_t *hash, char *err,
+                 int err_sz)
 {
-    int fd = ns_file_open_regular(path, max_bytes, "file", NULL, err, err_sz);
+    int fd = ns_file_open_regular(path, max_bytes, what, NULL, err, err_sz);
     if (fd < 0)
         return -1;
     uint64_t h = 0xcbf29ce484222325ull; /* FNV-1a 64: offset basis, then prime per byte */

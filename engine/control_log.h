@@ -12,7 +12,7 @@
  * may come before the header, "#KEY VALUE": what the log was recorded with (its provenance),
  *
  *     #needlesim 0.1.0                  the program's version
- *     #scenario prostate brachytherapy  the scenario's name (control characters written as '?')
+ *     #scenario prostate brachytherapy  the scenario's name (control characters as '?', 200 bytes)
  *     #scenario_hash 8c2f0e13a4b5c6d7   FNV-1a 64 of the scenario file's bytes, 16 hex digits
  *     #trainee A-17 / #session 2026-11-27.3   with --trainee / --session ([A-Za-z0-9._-]{1,64})
  *     #set KEY=VALUE                    each --set of the run, which its replay must repeat
@@ -89,8 +89,10 @@ int ns_control_log_check_scenario(const NsControlLog *log, const char *path, con
                                   uint64_t hash, bool rescore, char *err, int err_sz);
 
 /* 64-bit FNV-1a (the state hashes' function: sim/tissue.c) of a file's bytes: a regular file
- * of at most max_bytes. Returns 0, or -1 with "path: message" in err. */
-int ns_file_hash(const char *path, long long max_bytes, uint64_t *hash, char *err, int err_sz);
+ * of at most max_bytes (`what` names it in messages). Returns 0, or -1 with "path: message" in
+ * err. */
+int ns_file_hash(const char *path, long long max_bytes, const char *what, uint64_t *hash, char *err,
+                 int err_sz);
 
 /* A trainee or session ID: 1 to NS_CONTROL_LOG_ID_MAX characters of [A-Za-z0-9._-]. */
 bool ns_control_log_id_ok(const char *id);
