@@ -1,5 +1,6 @@
 /* needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]
  *                            [--set KEY=VALUE]... [--record LOG | --replay LOG] [--quiet]
+ *                            [--trainee ID] [--session ID] [--rescore]
  * needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--json]
  *
  * The run loop (DESIGN.md "Command line"): the scenario's tissue and needle are built, the
@@ -34,6 +35,7 @@
 #include "needle_path.h"
 #include "ns_limits.h"
 #include "ns_config.h"
+#include "ns_limits.h"
 #include "quality.h"
 #include "remesh.h"
 #include "rod.h"
@@ -45,11 +47,16 @@
 static const char run_usage[] =
     "usage: needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]\n"
     "                     [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv]\n"
+    "                     [--trainee ID] [--session ID] [--rescore]\n"
     "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
     "                     [--height H] [--frame-every K] [--quiet]\n";
 
 typedef struct RunOpts {
     const char *scenario, *out_dir, *record, *replay;
+    /* written into a recorded log (control_log.h); --rescore: replay a log recorded against
+     * another scenario file */
+    const char *trainee, *session;
+    bool rescore;
     const char *sets[32]; /* --set KEY=VALUE */
     int nsets;
     long steps; /* 0: the scenario decides */
@@ -1966,7 +1973,8 @@ static int parse_args(int argc, char **argv, RunOpts *o)
         } else if (strcmp(a, "-o") == 0 || strcmp(a, "--steps") == 0 ||
                    strcmp(a, "--threads") == 0 || strcmp(a, "--solver") == 0 ||
                    strcmp(a, "--record") == 0 || strcmp(a, "--replay") == 0 ||
-                   strcmp(a, "--set") == 0) {
+                   strcmp(a, "--set") == 0 || strcmp(a, "--trainee") == 0 ||
+                   strcmp(a, "--session") == 0) {
             if (!v)
                 return usage_error("%s needs a value", a);
             i++;
@@ -1989,6 +1997,14 @@ static int parse_args(int argc, char **argv, RunOpts *o)
                 o->record = v;
             } else if (strcmp(a, "--replay") == 0) {
                 o->replay = v;
+            } else if (strcmp(a, "--trainee") == 0 || strcmp(a, "--session") == 0) {
+                if (!ns_control_log_id_ok(v))
+                    return usage_error(a[2] == 't' ? "--trainee '%s': 1 to 64 characters of "
+                                                     "A-Z a-z 0-9 . _ - only"
+                                                   : "--session '%s': 1 to 64 characters of "
+                                                     "A-Z a-z 0-9 . _ - only",
+                                       v);
+                *(a[2] == 't' ? &o->trainee : &o->session) = v;
             } else if (strcmp(a, "--solver") == 0) {
                 o->solver = ns_coupled_solver_parse(v);
                 if (o->solver < 0)
@@ -2034,6 +2050,8 @@ static int parse_args(int argc, char **argv, RunOpts *o)
             o->no_render = true;
         } else if (strcmp(a, "--quiet") == 0) {
             o->quiet = true;
+        } else if (strcmp(a, "--rescore") == 0) {
+            o->rescore = true;
         } else if (a[0] == '-' && a[1] != '\0') {
             return usage_error("unknown option '%s'", a);
         } else if (!o->scenario) {
@@ -2044,6 +2062,8 @@ static int parse_args(int argc, char **argv, RunOpts *o)
     }
     if (!o->scenario)
         return usage_error("%s", "missing SCENARIO.lua");
+    if (o->rescore && !o->replay)
+        return usage_error("%s", "--rescore without --replay LOG.csv");
     if (o->record && o->replay && strcmp(o->record, o->replay) == 0)
         return usage_error("--record and --replay name the same file '%s'", o->record);
     if (o->no_render && (o->frames || o->video))
@@ -2084,8 +2104,16 @@ int ns_cmd_run(int argc, char **argv)
                    r.sc.where);
         rc = -1;
     }
+    /* The scenario file's identity, which a log carries and a replay checks (control_log.h). */
+    uint64_t sc_hash = 0;
+    if (rc == 0 && (r.opt.replay || r.opt.record))
+        rc = ns_file_hash(r.opt.scenario, NS_LIMIT_SCRIPT_FILE_BYTES, "scenario file", &sc_hash,
+                          err, sizeof err);
     if (rc == 0 && r.opt.replay)
         rc = ns_control_log_read(r.opt.replay, r.spec.dt, &r.replay, err, sizeof err);
+    if (rc == 0 && r.opt.replay)
+        rc = ns_control_log_check_scenario(&r.replay, r.opt.replay, r.sc.name, sc_hash,
+                                           r.opt.rescore, err, sizeof err);
     if (rc == 0 && r.opt.replay) { /* the same --set values as the recording */
         bool same = r.replay.nsets == r.opt.nsets;
         for (int i = 0; same && i < r.opt.nsets; i++) {
@@ -2120,7 +2148,8 @@ int ns_cmd_run(int argc, char **argv)
                 ns_set_err(err, sizeof err, "out of memory");
             rc = -1;
         } else {
-            ns_control_log_write_header(r.rec, r.opt.sets, r.opt.nsets);
+            NsLogProvenance prov = {NS_VERSION, r.sc.name, sc_hash, r.opt.trainee, r.opt.session};
+            ns_control_log_write_header(r.rec, &prov, r.opt.sets, r.opt.nsets);
         }
     }
     if (rc == 0)

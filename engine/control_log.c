@@ -2,11 +2,15 @@
 #include "control_log.h"
 
 #include <errno.h>
+#include <inttypes.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "err.h"
+#include "file_in.h"
+#include "ns_limits.h"
 
 void ns_control_log_free(NsControlLog *log)
 {
@@ -15,11 +19,115 @@ void ns_control_log_free(NsControlLog *log)
     log->n = 0;
 }
 
-void ns_control_log_write_header(FILE *f, const char *const *sets, int nsets)
+bool ns_control_log_id_ok(const char *id)
 {
+    size_t n = strlen(id);
+    return n >= 1 && n <= NS_CONTROL_LOG_ID_MAX &&
+           strspn(id, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-") == n;
+}
+
+/* A name as one line of a log: control characters and DEL as '?', at most 200 bytes (a
+ * reader takes lines of up to 1023). */
+static void put_name(FILE *f, const char *s)
+{
+    for (int n = 0; *s && n < 200; s++, n++)
+        fputc((unsigned char)*s < 0x20 || *s == 0x7f ? '?' : *s, f);
+}
+
+void ns_control_log_write_header(FILE *f, const NsLogProvenance *prov, const char *const *sets,
+                                 int nsets)
+{
+    if (prov) {
+        fprintf(f, "#needlesim %s\n#scenario ", prov->version);
+        put_name(f, prov->scenario);
+        fprintf(f, "\n#scenario_hash %016" PRIx64 "\n", prov->scenario_hash);
+        if (prov->trainee)
+            fprintf(f, "#trainee %s\n", prov->trainee);
+        if (prov->session)
+            fprintf(f, "#session %s\n", prov->session);
+    }
     for (int i = 0; i < nsets; i++)
         fprintf(f, "#set %s\n", sets[i]);
     fputs(NS_CONTROL_LOG_HEADER "\n", f);
+}
+
+int ns_file_hash(const char *path, long long max_bytes, const char *what, uint64_t *hash, char *err,
+                 int err_sz)
+{
+    int fd = ns_file_open_regular(path, max_bytes, what, NULL, err, err_sz);
+    if (fd < 0)
+        return -1;
+    uint64_t h = 0xcbf29ce484222325ull; /* FNV-1a 64: offset basis, then prime per byte */
+    unsigned char buf[65536];
+    long long total = 0;
+    for (;;) {
+        ssize_t got = read(fd, buf, sizeof buf);
+        if (got < 0 && errno == EINTR)
+            continue;
+        if (got < 0) {
+            ns_set_err(err, err_sz, "%s: cannot read: %s", path, strerror(errno));
+            close(fd);
+            return -1;
+        }
+        if (got == 0)
+            break;
+        total += got;
+        if (total > max_bytes) {
+            ns_set_err(err, err_sz, "%s: the file grew past the limit of %lld bytes", path,
+                       max_bytes);
+            close(fd);
+            return -1;
+        }
+        for (ssize_t i = 0; i < got; i++) {
+            h ^= buf[i];
+            h *= 0x100000001b3ull;
+        }
+    }
+    close(fd);
+    *hash = h;
+    return 0;
+}
+
+/* A name for a message: at most 80 bytes, control characters as '?'. */
+static const char *show_name(const char *s, char out[88])
+{
+    size_t n = 0;
+    for (; s[n] && n < 80; n++)
+        out[n] = (unsigned char)s[n] < 0x20 || s[n] == 0x7f ? '?' : s[n];
+    if (s[n])
+        memcpy(out + n, "...", 4);
+    else
+        out[n] = '\0';
+    return out;
+}
+
+int ns_control_log_check_scenario(const NsControlLog *log, const char *path, const char *name,
+                                  uint64_t hash, bool rescore, char *err, int err_sz)
+{
+    char a[88], b[88];
+    if (!log->has_hash) {
+        fprintf(stderr,
+                "needlesim: warning: %s has no #scenario_hash line (an older or hand-written "
+                "log): it is replayed against '%s' unchecked\n",
+                path, show_name(name, a));
+        return 0;
+    }
+    if (log->scenario_hash == hash)
+        return 0;
+    const char *recorded = log->scenario[0] ? log->scenario : "?";
+    if (rescore) {
+        fprintf(stderr,
+                "needlesim: %s: recorded against scenario '%s' (hash %016" PRIx64
+                "), re-scored against '%s' (hash %016" PRIx64 ") as --rescore asks\n",
+                path, show_name(recorded, a), log->scenario_hash, show_name(name, b), hash);
+        return 0;
+    }
+    ns_set_err(err, err_sz,
+               "%s:%ld: recorded against scenario '%s' (hash %016" PRIx64 "), not '%s' (hash "
+               "%016" PRIx64 "); --rescore replays it anyway",
+               path, log->hash_line, show_name(recorded, a), log->scenario_hash, show_name(name, b),
+               hash);
+    return -1;
 }
 
 void ns_control_log_write_row(FILE *f, double t, const NsControl *c)
@@ -84,35 +192,108 @@ static const char *const columns[7] = {"t_s",         "v_insert_m_s", "base_vx_m
                                        "base_vy_m_s", "base_vz_m_s",  "twist_rate_rad_s",
                                        "event"};
 
+/* One '#' line before the header: provenance, a --set, or a comment. 0, or -1 with a
+ * message. */
+static int read_comment(const char *p, const char *path, long lineno, NsControlLog *log, char *err,
+                        int err_sz)
+{
+    const char *v;
+    if (strncmp(p, "#set ", 5) == 0) {
+        v = p + 5;
+        if (log->nsets == NS_CONTROL_LOG_MAX_SETS || strlen(v) >= sizeof log->sets[0]) {
+            ns_set_err(err, err_sz, "%s:%ld: more than %d #set lines, or one longer than %zu bytes",
+                       path, lineno, NS_CONTROL_LOG_MAX_SETS, sizeof log->sets[0] - 1);
+            return -1;
+        }
+        memcpy(log->sets[log->nsets++], v, strlen(v) + 1);
+    } else if (strncmp(p, "#scenario_hash ", 15) == 0) {
+        v = p + 15;
+        char *end;
+        if (log->has_hash) {
+            ns_set_err(err, err_sz, "%s:%ld: a second #scenario_hash line", path, lineno);
+            return -1;
+        }
+        errno = 0;
+        unsigned long long h = strtoull(v, &end, 16);
+        if (strlen(v) != 16 || strspn(v, "0123456789abcdefABCDEF") != 16 || *end || errno) {
+            ns_set_err(err, err_sz, "%s:%ld: #scenario_hash must be 16 hex digits (got '%.40s')",
+                       path, lineno, v);
+            return -1;
+        }
+        log->scenario_hash = (uint64_t)h;
+        log->has_hash = true;
+        log->hash_line = lineno;
+    } else if (strncmp(p, "#scenario ", 10) == 0) {
+        snprintf(log->scenario, sizeof log->scenario, "%s", p + 10);
+    } else if (strncmp(p, "#needlesim ", 11) == 0) {
+        snprintf(log->version, sizeof log->version, "%s", p + 11);
+    } else if (strncmp(p, "#trainee ", 9) == 0 || strncmp(p, "#session ", 9) == 0) {
+        v = p + 9;
+        if (!ns_control_log_id_ok(v)) {
+            ns_set_err(err, err_sz,
+                       "%s:%ld: %.8s must be 1 to %d characters of A-Z a-z 0-9 . _ - (got "
+                       "'%.40s')",
+                       path, lineno, p, NS_CONTROL_LOG_ID_MAX, v);
+            return -1;
+        }
+        snprintf(p[1] == 't' ? log->trainee : log->session, sizeof log->trainee, "%s", v);
+    }
+    return 0; /* any other '#' line is a comment */
+}
+
+/* |value| within its limit (ns_limits.h), or -1 with "path:line: ..." */
+static int within(double v, double limit, const char *column, const char *unit, const char *path,
+                  long lineno, char *err, int err_sz)
+{
+    if (fabs(v) <= limit)
+        return 0;
+    ns_set_err(err, err_sz, "%s:%ld: %s %g %s is beyond the limit of %g %s", path, lineno, column,
+               v, unit, limit, unit);
+    return -1;
+}
+
 int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz)
 {
     memset(log, 0, sizeof *log);
-    FILE *f = fopen(path, "r");
+    /* A regular file within the size limit, checked before it is opened for reading (a FIFO
+     * or /dev/zero would block or never end); the rows are bounded below. */
+    int fd = ns_file_open_regular(path, NS_LIMIT_LOG_FILE_BYTES, "control log", NULL, err, err_sz);
+    FILE *f = fd >= 0 ? fdopen(fd, "r") : NULL;
     if (!f) {
-        ns_set_err(err, err_sz, "cannot open control log '%s': %s", path, strerror(errno));
+        if (fd >= 0) {
+            ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
+            close(fd);
+        }
         return -1;
     }
     char line[1024];
     long lineno = 0, cap = 0, blank = 0;
+    long long bytes = 0;
     int rc = 0;
-    /* '#' lines before the header: what the log was recorded with ("#set KEY=VALUE"). */
+    /* '#' lines before the header: what the log was recorded with (control_log.h). */
     int got = 0;
-    while ((got = fgets(line, sizeof line, f) != NULL)) {
+    while (rc == 0 && (got = fgets(line, sizeof line, f) != NULL)) {
         lineno++;
+        bytes += (long long)strlen(line);
         char *p = line;
         if (lineno == 1 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB &&
             (unsigned char)p[2] == 0xBF)
             p += 3; /* a UTF-8 byte-order mark */
+        if (!strchr(p, '\n') && !feof(f)) {
+            ns_set_err(err, err_sz, "%s:%ld: line too long", path, lineno);
+            rc = -1;
+            break;
+        }
         chomp(p);
         if (p[0] != '#') {
             memmove(line, p, strlen(p) + 1);
             break;
         }
-        if (strncmp(p, "#set ", 5) == 0 && log->nsets < NS_CONTROL_LOG_MAX_SETS &&
-            strlen(p + 5) < sizeof log->sets[0])
-            memcpy(log->sets[log->nsets++], p + 5, strlen(p + 5) + 1);
+        rc = read_comment(p, path, lineno, log, err, err_sz);
     }
-    if (!got) {
+    if (rc) {
+        /* the message is set */
+    } else if (!got) {
         ns_set_err(err, err_sz, "%s:%ld: no header (want %s)", path, lineno + 1,
                    NS_CONTROL_LOG_HEADER);
         rc = -1;
@@ -124,6 +305,14 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
     long header_line = lineno;
     while (rc == 0 && fgets(line, sizeof line, f)) {
         lineno++;
+        bytes += (long long)strlen(line);
+        if (bytes > NS_LIMIT_LOG_FILE_BYTES) { /* it grew since it was opened */
+            ns_set_err(err, err_sz,
+                       "%s:%ld: the control log is longer than the limit of %lld bytes", path,
+                       lineno, NS_LIMIT_LOG_FILE_BYTES);
+            rc = -1;
+            break;
+        }
         if (!strchr(line, '\n') && !feof(f)) {
             ns_set_err(err, err_sz, "%s:%ld: line too long", path, lineno);
             rc = -1;
@@ -183,6 +372,21 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
                        "%s:%ld: t_s is %.9g but row %ld of a run stepping by dt = %g s is at "
                        "t = %.9g s",
                        path, lineno, v[0], k + 1, dt, (double)k * dt);
+            rc = -1;
+            break;
+        }
+        /* Physical bounds (ns_limits.h): a row is one step's work, and that is bounded. */
+        rc = within(v[1], NS_LIMIT_INSERT_SPEED, columns[1], "m/s", path, lineno, err, err_sz);
+        for (int k = 2; k < 5 && rc == 0; k++)
+            rc = within(v[k], NS_LIMIT_BASE_SPEED, columns[k], "m/s", path, lineno, err, err_sz);
+        if (rc == 0)
+            rc = within(v[5], NS_LIMIT_TWIST_RATE, columns[5], "rad/s", path, lineno, err, err_sz);
+        if (rc)
+            break;
+        if (log->n >= NS_LIMIT_STEPS) {
+            ns_set_err(err, err_sz,
+                       "%s:%ld: more than %ld rows (NS_LIMIT_STEPS, the most steps a run takes)",
+                       path, lineno, (long)NS_LIMIT_STEPS);
             rc = -1;
             break;
         }

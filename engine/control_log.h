@@ -9,11 +9,24 @@
  *
  * Row k holds the controls applied for the step from t = k dt; numbers are written with 17
  * significant digits, so a replay applies exactly the recorded values. Lines starting with '#'
- * may come before the header; "#set KEY=VALUE" lines name the --set values of the recorded run,
- * which its replay must repeat. */
+ * may come before the header, "#KEY VALUE": what the log was recorded with (its provenance),
+ *
+ *     #needlesim 0.1.0                  the program's version
+ *     #scenario prostate brachytherapy  the scenario's name (control characters as '?', 200 bytes)
+ *     #scenario_hash 8c2f0e13a4b5c6d7   FNV-1a 64 of the scenario file's bytes, 16 hex digits
+ *     #trainee A-17 / #session 2026-11-27.3   with --trainee / --session ([A-Za-z0-9._-]{1,64})
+ *     #set KEY=VALUE                    each --set of the run, which its replay must repeat
+ *
+ * Other '#' lines are comments, skipped (later versions add keys). A replay refuses a log whose
+ * scenario hash is not its scenario file's, unless told to re-score it; a log without a hash
+ * (older logs, hand-written ones) is replayed with a warning. The values of a row are bounded
+ * by ns_limits.h (NS_LIMIT_INSERT_SPEED, ..._BASE_SPEED, ..._TWIST_RATE), the rows by
+ * NS_LIMIT_STEPS and the file by NS_LIMIT_LOG_FILE_BYTES (a regular file only). */
 #ifndef NS_CONTROL_LOG_H
 #define NS_CONTROL_LOG_H
 
+#include <stdbool.h>
+#include <stdint.h>
 #include <stdio.h>
 
 #define NS_CONTROL_LOG_HEADER                                                                      \
@@ -37,23 +50,58 @@ typedef struct NsControl {
 
 #define NS_CONTROL_LOG_MAX_SETS 32
 
+/* Trainee and session IDs: 1 to NS_CONTROL_LOG_ID_MAX characters of [A-Za-z0-9._-]. */
+#define NS_CONTROL_LOG_ID_MAX 64
+
 typedef struct NsControlLog {
     NsControl *rows;
     long n;
     char sets[NS_CONTROL_LOG_MAX_SETS][256]; /* the --set KEY=VALUE it was recorded with */
     int nsets;
+    /* provenance: empty strings, has_hash false, when the log has no such line */
+    char version[64];   /* #needlesim */
+    char scenario[256]; /* #scenario */
+    uint64_t scenario_hash;
+    bool has_hash;
+    long hash_line; /* the #scenario_hash line, for messages */
+    char trainee[NS_CONTROL_LOG_ID_MAX + 1], session[NS_CONTROL_LOG_ID_MAX + 1];
 } NsControlLog;
 
+/* What a recorded log says it was recorded with. trainee and session may be NULL. */
+typedef struct NsLogProvenance {
+    const char *version, *scenario;
+    uint64_t scenario_hash;
+    const char *trainee, *session;
+} NsLogProvenance;
+
 /* Reads a log for a scenario stepping by dt: '#' lines, the header above, then one row per step
- * whose t is k dt (within dt / 1000), finite decimal numbers, the event empty, "drop_seed" or
- * "next_needle:px;py;pz;dx;dy;dz[;bx;by;bz]" (the new entry: point, direction, bevel_toward).
- * Returns 0, or -1 with "path:line: ..." in err. */
+ * whose t is k dt (within dt / 1000), finite decimal numbers within the limits, the event
+ * empty, "drop_seed" or "next_needle:px;py;pz;dx;dy;dz[;bx;by;bz]" (the new entry: point,
+ * direction, bevel_toward). Returns 0, or -1 with "path:line: ..." in err. */
 int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz);
 void ns_control_log_free(NsControlLog *log);
 
-/* Writes "#set KEY=VALUE" for each --set the run has (a replay must be given the same ones),
- * then the header line. */
-void ns_control_log_write_header(FILE *f, const char *const *sets, int nsets);
+/* Whether the log may drive a replay of the scenario `name` whose file hashes to `hash`: 0 when
+ * its #scenario_hash is that hash; when it is another, -1 with "path:line: recorded against
+ * scenario 'X' (hash ...), not 'Y' (hash ...); --rescore replays it anyway" in err, or, with
+ * rescore, 0 and a note on stderr; without a #scenario_hash line, 0 and a warning on stderr. */
+int ns_control_log_check_scenario(const NsControlLog *log, const char *path, const char *name,
+                                  uint64_t hash, bool rescore, char *err, int err_sz);
+
+/* 64-bit FNV-1a (the state hashes' function: sim/tissue.c) of a file's bytes: a regular file
+ * of at most max_bytes (`what` names it in messages). Returns 0, or -1 with "path: message" in
+ * err. */
+int ns_file_hash(const char *path, long long max_bytes, const char *what, uint64_t *hash, char *err,
+                 int err_sz);
+
+/* A trainee or session ID: 1 to NS_CONTROL_LOG_ID_MAX characters of [A-Za-z0-9._-]. */
+bool ns_control_log_id_ok(const char *id);
+
+/* Writes the provenance lines (#needlesim, #scenario, #scenario_hash, #trainee and #session
+ * when given), "#set KEY=VALUE" for each --set the run has (a replay must be given the same
+ * ones), then the header line. */
+void ns_control_log_write_header(FILE *f, const NsLogProvenance *prov, const char *const *sets,
+                                 int nsets);
 void ns_control_log_write_row(FILE *f, double t, const NsControl *c);
 
 #endif

@@ -10,6 +10,7 @@
 
 #include "err.h"
 #include "mesh.h"
+#include "names.h"
 #include "ns_limits.h"
 #include "remesh.h"
 
@@ -452,6 +453,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     lua_settop(L, si);
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
+    rc = rc ? rc : ns_names_check_run(sc, spec, err, err_sz); /* names.h: CSV- and JSON-safe */
     lua_settop(L, top);
     if (rc == 0)
         rc = check_spec(sc, spec, err, err_sz);

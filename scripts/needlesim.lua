@@ -276,6 +276,40 @@ function Args:string(k, default)
     return v
 end
 
+-- Names end up in CSV headers (trajectory.csv's marker columns), JSON and log lines: 1 to
+-- NS_LIMIT_NAME_LENGTH bytes (sim/ns_limits.h) of printable ASCII, spaces included, without
+-- ',', '"' or '\'. The engine checks them again (engine/names.c).
+local NAME_MAX = 64
+local NAME_RULE = "1 to 64 bytes of printable ASCII without ',', '\"' or '\\' (spaces are fine)"
+
+-- What is wrong with a name, or nil.
+local function name_problem(s)
+    if #s > NAME_MAX then
+        return fmt("it is %d bytes long", #s)
+    end
+    for i = 1, #s do
+        local c = s:byte(i)
+        if c < 32 or c > 126 then
+            return fmt("byte %d is 0x%02x", i, c)
+        elseif c == 44 or c == 34 or c == 92 then
+            return fmt("byte %d is '%s'", i, string.char(c))
+        end
+    end
+    return nil
+end
+
+-- A name field (see NAME_RULE); `label` names it in messages (default: the field).
+function Args:name(k, label, default)
+    local v = self:string(k, default)
+    if v ~= nil then
+        local why = name_problem(v)
+        if why then
+            self:fail("%s must be %s (got %s: %s)", label or k, NAME_RULE, describe(v), why)
+        end
+    end
+    return v
+end
+
 function Args:boolean(k, default)
     local v = self.t[k]
     if v == nil then
@@ -377,7 +411,7 @@ function ns.material(t)
         a.t = merged
     end
     local m = {
-        name = a:string("name"),
+        name = a:name("name"),
         youngs = a:number("youngs", GT0, "> 0 [Pa]"),
         poisson = a:number("poisson", function(x) return x >= 0 and x < 0.5 end,
             "in [0, 0.5)"),
@@ -707,7 +741,7 @@ function ns.tissue.shapes(t)
         local ra = args(r, fmt("%s: regions[%d]", ctor, i), where,
             { "name", "shape", "material", "fixed" })
         local region = {
-            name = ra:string("name"),
+            name = ra:name("name"),
             shape = ra:shape("shape"),
             material = ra:material("material"),
             fixed = ra:boolean("fixed", false),
@@ -768,6 +802,10 @@ function ns.tissue.file(t)
             end
             if type(name) ~= "string" or name == "" then
                 a:fail("names[%d] must be a non-empty string (got %s)", tag, describe(name))
+            end
+            local why = name_problem(name)
+            if why then
+                a:fail("names[%d] must be %s (got %s: %s)", tag, NAME_RULE, describe(name), why)
             end
             tissue.names[tag] = name
         end
@@ -1099,7 +1137,7 @@ local function targets_of(v, where)
     local out, names = {}, {}
     for i, tv in ipairs(v) do
         local a = args(tv, fmt("ns.scenario: targets[%d]", i), where, TARGET_FIELDS)
-        local tg = { name = a:string("name"), at = a:vec3("at", ANY, " [m]"),
+        local tg = { name = a:name("name"), at = a:vec3("at", ANY, " [m]"),
             tolerance = a:number("tolerance", GT0, "> 0 [m]") }
         if names[tg.name] then
             a:fail("name '%s' is used by targets[%d] already", tg.name, names[tg.name])
@@ -1143,10 +1181,10 @@ function ns.scenario(t)
     sc.entry = entry_of(t.entry, where)
     sc.targets = targets_of(t.targets, where)
     sc.markers = list_of(t.markers, where, "markers", MARKER_FIELDS, function(m)
-        return { name = m:string("name"), at = m:vec3("at", ANY, " [m]") }
+        return { name = m:name("name"), at = m:vec3("at", ANY, " [m]") }
     end, true)
     sc.obstacles = list_of(t.obstacles, where, "obstacles", OBSTACLE_FIELDS, function(o)
-        return { name = o:string("name"), region = o:string("region") }
+        return { name = o:name("name"), region = o:string("region") }
     end, true)
     sc.seeds = list_of(t.seeds, where, "seeds", SEED_FIELDS, function(o)
         return { target = o:string("target") }

@@ -15,6 +15,9 @@
 
 #include "mesh_io.h"
 #include "err.h"
+#include "file_in.h"
+#include "mesh_check.h"
+#include "ns_limits.h"
 #include "quality.h"
 
 #include <errno.h>
@@ -926,6 +929,81 @@ static int boundary_error(const MshReader *r, const MshData *d, NsMesh *m)
                      st.closed ? "manifold" : "closed");
 }
 
+/* One connected solid, no two tets in the same place (mesh_check.h): two copies of a part,
+ * interpenetrating or side by side, pass every check above (each copy is a closed manifold on
+ * its own), and would be simulated as twice the tissue. Tet t of m is d->tets[t] here. */
+static int check_solid(const MshReader *r, const MshData *d, NsMesh *m)
+{
+    int nt = m->tet_slots;
+    int *part = malloc((size_t)nt * sizeof *part), *count = malloc((size_t)nt * sizeof *count);
+    double *volume = malloc((size_t)nt * sizeof *volume);
+    int parts = part && count && volume ? ns_mesh_parts(m, part, count, volume) : -1;
+    NsTetOverlap o;
+    int overlap = parts >= 0 ? ns_mesh_find_overlap(m, &o) : -1;
+    int rc = 0;
+    if (parts < 0 || overlap < 0) {
+        rc = READ_FAIL(r, d->elements_line, "out of memory checking the mesh");
+    } else if (overlap) {
+        const RawTet *outer = &d->tets[o.outer], *inner = &d->tets[o.inner];
+        char what[96], ctx[256];
+        if (o.node >= 0)
+            snprintf(what, sizeof what, "node %lld of element %lld",
+                     (long long)d->nodes[o.node].tag, (long long)inner->tag);
+        else
+            snprintf(what, sizeof what, "%s of element %lld",
+                     o.node == -1 ? "the centre" : "an inner point", (long long)inner->tag);
+        double total = 0.0;
+        for (int k = 0; k < parts; k++)
+            total += volume[k];
+        if (parts > 1)
+            snprintf(ctx, sizeof ctx,
+                     "the elements hold %.6g m^3 in %d separate parts, the first two %.6g and "
+                     "%.6g m^3: two copies of a part?",
+                     total, parts, volume[0], volume[1]);
+        else
+            snprintf(ctx, sizeof ctx, "the elements hold %.6g m^3: the mesh folds over itself",
+                     total);
+        rc = READ_FAIL(r, inner->line, "tets overlap: %s lies inside element %lld (%s)", what,
+                       (long long)outer->tag, ctx);
+    } else if (parts > 1) {
+        /* each part's first tet, in the file's own element tags */
+        int *first = malloc((size_t)parts * sizeof *first);
+        if (!first) {
+            rc = READ_FAIL(r, d->elements_line, "out of memory checking the mesh");
+        } else {
+            for (int k = 0; k < parts; k++)
+                first[k] = -1;
+            for (int t = 0; t < nt; t++)
+                if (part[t] >= 0 && first[part[t]] < 0)
+                    first[part[t]] = t;
+            char list[512] = "";
+            int shown = parts < 6 ? parts : 6;
+            for (int k = 0; k < shown; k++) {
+                size_t n = strlen(list);
+                snprintf(list + n, sizeof list - n, "%s%d tets from element %lld",
+                         k == 0           ? ""
+                         : k == parts - 1 ? " and "
+                                          : ", ",
+                         count[k], (long long)d->tets[first[k]].tag);
+            }
+            if (parts > shown) {
+                size_t n = strlen(list);
+                snprintf(list + n, sizeof list - n, " and %d more", parts - shown);
+            }
+            rc = READ_FAIL(r, d->tets[first[1]].line,
+                           "the mesh has %d separate solid parts (tets that share no face): %s; "
+                           "a mesh file must be one connected solid (Gmsh: Coherence joins "
+                           "parts that touch)",
+                           parts, list);
+            free(first);
+        }
+    }
+    free(part);
+    free(count);
+    free(volume);
+    return rc;
+}
+
 static int build_mesh(const MshReader *r, MshData *d, NsMesh *m)
 {
     if (d->tet_count == 0)
@@ -1019,6 +1097,8 @@ static int build_mesh(const MshReader *r, MshData *d, NsMesh *m)
                            (long long)d->tets[t].tag);
     if (rc == 0)
         rc = boundary_error(r, d, m);
+    if (rc == 0)
+        rc = check_solid(r, d, m);
 done:
     free(tn);
     free(region);
@@ -1026,34 +1106,53 @@ done:
     return rc;
 }
 
+/* The whole file, NUL-terminated: a regular file of at most NS_LIMIT_MESH_FILE_BYTES bytes,
+ * checked before the first byte is read (file_in.h: a FIFO or /dev/zero is refused at once). */
 static int read_whole_file(const char *path, char **out, size_t *out_len, char *err, int err_sz)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
+    long long size;
+    int fd = ns_file_open_regular(path, NS_LIMIT_MESH_FILE_BYTES, "mesh file", &size, err, err_sz);
+    if (fd < 0)
+        return -1;
+    /* The size is the stat's: read one byte more to see a file that grew since, up to the
+     * limit. */
+    size_t cap = (size_t)size + 2, len = 0;
+    char *buf = malloc(cap);
+    if (!buf) {
+        ns_set_err(err, err_sz, "%s: out of memory reading the file (%lld bytes)", path, size);
+        close(fd);
         return -1;
     }
-    char *buf = NULL;
-    size_t len = 0, cap = 0;
     for (;;) {
-        if (grow((void **)&buf, &cap, len + 65536 + 1, 1)) {
-            ns_set_err(err, err_sz, "%s: out of memory reading the file", path);
+        if ((long long)len > NS_LIMIT_MESH_FILE_BYTES) {
+            ns_set_err(err, err_sz,
+                       "%s: the mesh file grew past the limit of %lld bytes while it was read",
+                       path, NS_LIMIT_MESH_FILE_BYTES);
             free(buf);
-            fclose(f);
+            close(fd);
             return -1;
         }
-        size_t got = fread(buf + len, 1, cap - len - 1, f);
-        len += got;
+        if (len + 1 == cap && grow((void **)&buf, &cap, cap + 65536, 1)) {
+            ns_set_err(err, err_sz, "%s: out of memory reading the file", path);
+            free(buf);
+            close(fd);
+            return -1;
+        }
+        size_t want = cap - len - 1, most = (size_t)NS_LIMIT_MESH_FILE_BYTES + 1 - len;
+        ssize_t got = read(fd, buf + len, want < most ? want : most);
+        if (got < 0 && errno == EINTR)
+            continue;
+        if (got < 0) {
+            ns_set_err(err, err_sz, "%s: cannot read: %s", path, strerror(errno));
+            free(buf);
+            close(fd);
+            return -1;
+        }
         if (got == 0)
             break;
+        len += (size_t)got;
     }
-    if (ferror(f)) {
-        ns_set_err(err, err_sz, "%s: cannot read: %s", path, strerror(errno));
-        free(buf);
-        fclose(f);
-        return -1;
-    }
-    fclose(f);
+    close(fd);
     buf[len] = '\0';
     *out = buf;
     *out_len = len;

@@ -2,8 +2,10 @@
  * unstructured grid .vtu (write, for ParaView).
  *
  * Regions travel as Gmsh physical tags: physical tag = region + 1 (Gmsh tags start at 1).
- * Reading validates the mesh: a degenerate or inverted tet, a node no tet uses, or a boundary
- * that is not closed and manifold is an error naming the element or node, not a crash. */
+ * Reading validates the mesh: a degenerate or inverted tet, a node no tet uses, a boundary
+ * that is not closed and manifold, overlapping tets or separate solid parts (mesh_check.h) is
+ * an error naming the element or node, not a crash. Only a regular file of at most
+ * NS_LIMIT_MESH_FILE_BYTES (ns_limits.h) is read (file_in.h). */
 #ifndef NS_MESH_IO_H
 #define NS_MESH_IO_H
 

@@ -5,7 +5,9 @@
 #define _GNU_SOURCE 1
 #endif
 
+#include "mesh_check.h"
 #include "mesh_io.h"
+#include "ns_limits.h"
 #include "quality.h"
 #include "ns_test.h"
 
@@ -748,6 +750,135 @@ static int read_missing_file(void)
 }
 
 /* ---------------------------------------------------------------------------------------------
+ * Whole-mesh checks: one connected solid, no overlap (sim/mesh_check.h)
+ * ------------------------------------------------------------------------------------------- */
+
+/* A 2 x 2 x 2 grid of cubes of side h, plus a copy of it moved by shift (its own nodes). */
+static int two_copies(NsMesh *m, double h, const double shift[3])
+{
+    if (build_grid(m, 2, 2, 2, h, NULL))
+        return -1;
+    int nn = m->node_slots, nt = m->tet_slots;
+    for (int i = 0; i < nn; i++) {
+        double u[3] = {m->u[3 * i] + shift[0], m->u[3 * i + 1] + shift[1],
+                       m->u[3 * i + 2] + shift[2]};
+        if (ns_mesh_add_node(m, u) != nn + i)
+            return -1;
+    }
+    for (int t = 0; t < nt; t++) {
+        int v[4];
+        for (int k = 0; k < 4; k++)
+            v[k] = m->tet_node[4 * t + k] + nn;
+        if (ns_mesh_add_tet(m, v, 0) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* Writes m, reads it back, expects an error containing each of the messages. */
+static int expect_read_error(const NsMesh *m, const char *name, const char *msg1, const char *msg2)
+{
+    char path[512], err[512];
+    tmp_path(path, name);
+    ENSURE(ns_mesh_write_msh(path, m, NULL, 0, err, sizeof err) == 0);
+    NsMesh back;
+    err[0] = '\0';
+    int rc = ns_mesh_read_msh(path, &back, err, sizeof err);
+    bool ok = rc == -1 && strstr(err, path) == err && strstr(err, msg1) && strstr(err, msg2);
+    if (!ok)
+        fprintf(stderr, "%s: rc %d, message \"%s\"\n", name, rc, err);
+    ENSURE(ok);
+    ENSURE(back.tet_alive == 0 && back.node_alive == 0);
+    ns_mesh_free(&back);
+    return 0;
+}
+
+static int overlapping_copies(void)
+{
+    NsMesh m;
+    /* two interpenetrating copies of a cube: the nodes of one inside the tets of the other */
+    const double half[3] = {0.5, 0.5, 0.5};
+    ENSURE(two_copies(&m, 1.0, half) == 0);
+    ENSURE(expect_read_error(&m, "interpenetrating.msh", "tets overlap: an inner point of element",
+                             "the elements hold 16 m^3 in 2 separate parts, the first two 8 and "
+                             "8 m^3: two copies of a part?") == 0);
+    ns_mesh_free(&m);
+    /* two copies in the same place (no node inside another tet: their centres are) */
+    const double none[3] = {0, 0, 0};
+    ENSURE(two_copies(&m, 1.0, none) == 0);
+    ENSURE(expect_read_error(&m, "coincident.msh", "tets overlap: the centre of element", "") == 0);
+    ns_mesh_free(&m);
+    /* shifted by less than an element: still found */
+    const double small[3] = {0.3, 0.1, 0.2};
+    ENSURE(two_copies(&m, 1.0, small) == 0);
+    ENSURE(expect_read_error(&m, "shifted.msh", "tets overlap:", "two copies") == 0);
+    ns_mesh_free(&m);
+    return 0;
+}
+
+static int disconnected_parts(void)
+{
+    NsMesh m;
+    /* side by side, apart: two parts of 48 tets each, named by their first elements */
+    const double apart[3] = {5.0, 0.0, 0.0};
+    ENSURE(two_copies(&m, 1.0, apart) == 0);
+    ENSURE(expect_read_error(&m, "apart.msh",
+                             "the mesh has 2 separate solid parts (tets that share no face): 48 "
+                             "tets from element 1 and 48 tets from element 49",
+                             "one connected solid") == 0);
+    ns_mesh_free(&m);
+    /* face to face but with nodes of their own: not joined either */
+    const double touching[3] = {2.0, 0.0, 0.0};
+    ENSURE(two_copies(&m, 1.0, touching) == 0);
+    ENSURE(expect_read_error(&m, "touching.msh", "2 separate solid parts", "Coherence") == 0);
+    ns_mesh_free(&m);
+    /* one grid of 2 x 2 x 2 cubes is one part, and a valid mesh passes the overlap test */
+    ENSURE(build_grid(&m, 3, 2, 2, 0.01, NULL) == 0);
+    int part[72], count[72];
+    double volume[72];
+    ENSURE(ns_mesh_parts(&m, part, count, volume) == 1 && count[0] == 72);
+    ENSURE(fabs(volume[0] - 12e-6) < 1e-15);
+    NsTetOverlap o;
+    ENSURE(ns_mesh_find_overlap(&m, &o) == 0);
+    ns_mesh_free(&m);
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------------
+ * Files that are not regular, or too large: refused before a byte is read
+ * ------------------------------------------------------------------------------------------- */
+
+static int special_files(void)
+{
+    NsMesh m;
+    char path[512], err[512];
+    /* a FIFO with no writer: opening it for reading would block forever */
+    tmp_path(path, "fifo.msh");
+    ENSURE(mkfifo(path, 0600) == 0);
+    ENSURE(ns_mesh_read_msh(path, &m, err, sizeof err) == -1);
+    ENSURE(strstr(err, path) == err && strstr(err, "is a FIFO (named pipe), not a mesh file"));
+    ns_mesh_free(&m);
+    /* /dev/zero never ends */
+    ENSURE(ns_mesh_read_msh("/dev/zero", &m, err, sizeof err) == -1);
+    ENSURE(strstr(err, "/dev/zero: is a character device, not a mesh file") == err);
+    ns_mesh_free(&m);
+    /* a sparse file one byte over the limit: refused by its size, not read */
+    tmp_path(path, "huge.msh");
+    FILE *f = fopen(path, "wb");
+    ENSURE(f != NULL);
+    ENSURE(ftruncate(fileno(f), (off_t)(NS_LIMIT_MESH_FILE_BYTES + 1)) == 0);
+    fclose(f);
+    ENSURE(ns_mesh_read_msh(path, &m, err, sizeof err) == -1);
+    char want[128];
+    snprintf(want, sizeof want, "the mesh file is %lld bytes, more than the limit of %lld bytes",
+             NS_LIMIT_MESH_FILE_BYTES + 1, NS_LIMIT_MESH_FILE_BYTES);
+    ENSURE(strstr(err, path) == err && strstr(err, want));
+    ns_mesh_free(&m);
+    unlink(path);
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------------
  * Writing errors
  * ------------------------------------------------------------------------------------------- */
 
@@ -821,4 +952,6 @@ NS_TEST_MAIN({"msh41_round_trip", msh41_round_trip}, {"msh22_fixture", msh22_fix
              {"msh22_physical_copies", msh22_physical_copies}, {"msh41_fixture", msh41_fixture},
              {"msh41_partitioned", msh41_partitioned}, {"gmsh_files", gmsh_files},
              {"vtu_write", vtu_write}, {"read_errors", read_errors},
-             {"read_missing_file", read_missing_file}, {"write_errors", write_errors})
+             {"read_missing_file", read_missing_file}, {"write_errors", write_errors},
+             {"overlapping_copies", overlapping_copies}, {"disconnected_parts", disconnected_parts},
+             {"special_files", special_files})

@@ -186,16 +186,45 @@ same_run() { # name, report A, report B
 # Replayed into a copy of the scenario without its script: the log alone drives the needle.
 sed '/^    script = function()$/,/^    end,$/d' "$TUT" >"$TMP/noscript.lua"
 if grep -q "act.insert" "$TMP/noscript.lua"; then fail "script removed from the copy" "sed"; fi
+# The copy is another file: the log is refused against it, naming both, unless --rescore.
 "$BIN" run "$TMP/noscript.lua" -o "$TMP/t3" --replay "$TMP/t1.csv" --quiet >/dev/null 2>"$TMP/err3"
-same_run "--record then --replay (scenario without its script): same state hash and score" \
+rc=$?
+if [ $rc = 1 ] && grep -Eq "t1.csv:3: recorded against scenario 'tutorial' \(hash [0-9a-f]{16}\), not 'tutorial' \(hash [0-9a-f]{16}\); --rescore replays it anyway" "$TMP/err3" &&
+    [ ! -e "$TMP/t3/report.json" ]; then
+    pass "a log replayed against another scenario file: exit 1, both hashes named"
+else
+    fail "log against another scenario" "exit $rc: $(head -1 "$TMP/err3")"
+fi
+"$BIN" run "$TMP/noscript.lua" -o "$TMP/t3" --replay "$TMP/t1.csv" --rescore --quiet >/dev/null 2>"$TMP/err3"
+same_run "--record then --replay --rescore (scenario without its script): same state hash and score" \
     "$TMP/t1/report.json" "$TMP/t3/report.json"
+if grep -q "re-scored against 'tutorial'" "$TMP/err3"; then pass "--rescore says so on stderr"; else fail "--rescore note" "$(head -1 "$TMP/err3")"; fi
+# The log's provenance lines; a log without them (older, hand-written) replays with a warning.
+h=$(python3 -c 'import sys
+h = 0xcbf29ce484222325
+for b in open(sys.argv[1], "rb").read():
+    h = ((h ^ b) * 0x100000001b3) % 2**64
+print("%016x" % h)' "$TUT")
+if [ "$(head -3 "$TMP/t1.csv")" = "$(printf '#needlesim %s\n#scenario tutorial\n#scenario_hash %s' "$("$BIN" --version | grep -o '[0-9][0-9.]*' | head -1)" "$h")" ]; then
+    pass "a recorded log starts with #needlesim, #scenario and #scenario_hash (FNV-1a 64 of the file)"
+else
+    fail "log provenance" "$(head -3 "$TMP/t1.csv" | tr '\n' ' ') (want hash $h)"
+fi
+grep -v '^#' "$TMP/t1.csv" >"$TMP/t1_old.csv"
+"$BIN" run "$TUT" -o "$TMP/t5" --replay "$TMP/t1_old.csv" --quiet >/dev/null 2>"$TMP/err5"
+rc=$?
+if [ $rc = 0 ] && grep -q "warning: .*t1_old.csv has no #scenario_hash line" "$TMP/err5"; then
+    same_run "a log without provenance replays, with a warning" "$TMP/t1/report.json" "$TMP/t5/report.json"
+else
+    fail "log without provenance" "exit $rc: $(head -1 "$TMP/err5")"
+fi
 # ... and a log changed in one row drives it elsewhere.
 sed '40s/^\([^,]*\),[^,]*,/\1,0.03,/' "$TMP/t1.csv" >"$TMP/t1_changed.csv"
-"$BIN" run "$TMP/noscript.lua" -o "$TMP/t4" --replay "$TMP/t1_changed.csv" --quiet >/dev/null 2>"$TMP/err4"
+"$BIN" run "$TMP/noscript.lua" -o "$TMP/t4" --replay "$TMP/t1_changed.csv" --rescore --quiet >/dev/null 2>"$TMP/err4"
 h1=$(grep '"state_hash"' "$TMP/t1/report.json")
 h4=$(grep '"state_hash"' "$TMP/t4/report.json" 2>/dev/null)
 if [ -n "$h4" ] && [ "$h1" != "$h4" ]; then pass "a log changed in one row gives another state"; else fail "changed log" "$h1 / $h4 $(head -1 "$TMP/err4")"; fi
-if [ "$(wc -l <"$TMP/t1.csv")" = "$(($(grep -o '"steps": [0-9]*' "$TMP/t1/report.json" | grep -o '[0-9]*$') + 1))" ]; then
+if [ "$(grep -vc '^#' "$TMP/t1.csv")" = "$(($(grep -o '"steps": [0-9]*' "$TMP/t1/report.json" | grep -o '[0-9]*$') + 1))" ]; then
     pass "the log has a header and one row per step"
 else
     fail "log rows" "$(wc -l <"$TMP/t1.csv") lines"
@@ -213,12 +242,65 @@ bad_log() { # name, sed expression on the log, expected message (grep -E)
         fail "$1" "exit $rc: $(head -2 "$TMP/err_$1")"
     fi
 }
-bad_log log_bad_number '5s/^\([^,]*\),[^,]*,/\1,fast,/' "log_bad_number.csv:5: v_insert_m_s must be a finite number \(got 'fast'\)"
-bad_log log_short_row '7s/,[^,]*$//' "log_short_row.csv:7: expected 7 comma-separated fields"
-bad_log log_bad_time '9s/^[^,]*,/0.5,/' "log_bad_time.csv:9: t_s is 0.5 but row 8"
-bad_log log_bad_event '4s/,$/,explode/' "log_bad_event.csv:4: unknown event 'explode'"
-bad_log log_bad_needle '6s/,$/,next_needle:0;0;0;0;0;0/' "log_bad_needle.csv:6: next_needle: expected px;py;pz;dx;dy;dz"
-bad_log log_bad_header '1s/t_s/time/' "log_bad_header.csv:1: the header must be"
+# (lines 1-3 are #needlesim, #scenario and #scenario_hash; the header is line 4)
+bad_log log_bad_number '8s/^\([^,]*\),[^,]*,/\1,fast,/' "log_bad_number.csv:8: v_insert_m_s must be a finite number \(got 'fast'\)"
+bad_log log_short_row '10s/,[^,]*$//' "log_short_row.csv:10: expected 7 comma-separated fields"
+bad_log log_bad_time '12s/^[^,]*,/0.5,/' "log_bad_time.csv:12: t_s is 0.5 but row 8"
+bad_log log_bad_event '7s/,$/,explode/' "log_bad_event.csv:7: unknown event 'explode'"
+bad_log log_bad_needle '9s/,$/,next_needle:0;0;0;0;0;0/' "log_bad_needle.csv:9: next_needle: expected px;py;pz;dx;dy;dz"
+bad_log log_bad_header '4s/t_s/time/' "log_bad_header.csv:4: the header must be"
+# Controls beyond the limits of sim/ns_limits.h.
+bad_log log_fast '8s/^\([^,]*\),[^,]*,/\1,1e9,/' "log_fast.csv:8: v_insert_m_s 1e\+09 m/s is beyond the limit of 0.5 m/s"
+bad_log log_base '9s/^\([^,]*\),\([^,]*\),[^,]*,/\1,\2,-0.7,/' "log_base.csv:9: base_vx_m_s -0.7 m/s is beyond the limit of 0.5 m/s"
+bad_log log_spin '10s/,[^,]*,\([^,]*\)$/,1000,\1/' "log_spin.csv:10: twist_rate_rad_s 1000 rad/s is beyond the limit of 63 rad/s"
+# Provenance lines that do not parse; a log recorded against another file of the same name.
+bad_log log_bad_hash '3s/ .*/ 12345/' "log_bad_hash.csv:3: #scenario_hash must be 16 hex digits \(got '12345'\)"
+bad_log log_bad_trainee '3a#trainee a/b' "log_bad_trainee.csv:4: #trainee must be 1 to 64 characters"
+bad_log log_other_hash '3s/ .*/ 0123456789abcdef/' "log_other_hash.csv:3: recorded against scenario 'tutorial' \(hash 0123456789abcdef\), not 'tutorial'"
+# Rows: at most NS_LIMIT_STEPS (2,000,000).
+python3 - "$TMP/t1.csv" "$TMP/log_rows.csv" <<'PY'
+import sys
+lines = open(sys.argv[1]).read().splitlines()
+with open(sys.argv[2], "w") as f:
+    f.write("\n".join(lines[:4]) + "\n")
+    for k in range(2000001):
+        f.write("%.17g,0,0,0,0,0,\n" % (k * 0.01))
+PY
+"$BIN" run "$TUT" -o "$TMP/o_rows" --replay "$TMP/log_rows.csv" --quiet >/dev/null 2>"$TMP/err_rows"
+rc=$?
+if [ $rc = 1 ] && grep -q "log_rows.csv:2000005: more than 2000000 rows" "$TMP/err_rows"; then
+    pass "a log of more than NS_LIMIT_STEPS rows: exit 1"
+else
+    fail "log rows limit" "exit $rc: $(head -1 "$TMP/err_rows")"
+fi
+rm -f "$TMP/log_rows.csv"
+# Not a regular file, or too large: refused before it is read (timeout: it must not block).
+mkfifo "$TMP/log_fifo.csv"
+truncate -s 300M "$TMP/log_huge.csv"
+for f in "$TMP/log_fifo.csv:is a FIFO" "/dev/zero:is a character device" "$TMP/log_huge.csv:is 314572800 bytes, more than the limit"; do
+    timeout 20 "$BIN" run "$TUT" -o "$TMP/o_fifo" --replay "${f%%:*}" --quiet >/dev/null 2>"$TMP/err_fifo"
+    rc=$?
+    if [ $rc = 1 ] && grep -q "${f#*:}" "$TMP/err_fifo"; then
+        pass "--replay $(basename "${f%%:*}"): exit 1 at once"
+    else
+        fail "--replay ${f%%:*}" "exit $rc: $(head -1 "$TMP/err_fifo")"
+    fi
+done
+rm -f "$TMP/log_huge.csv"
+# --trainee and --session go into the log; IDs outside [A-Za-z0-9._-]{1,64} are usage errors.
+"$BIN" run "$TUT" -o "$TMP/o_ids" --steps 3 --no-render --trainee A-17 --session 2026.11.27_3 \
+    --record "$TMP/ids.csv" --quiet >/dev/null 2>"$TMP/err_ids"
+if [ $? = 0 ] && sed -n 4,5p "$TMP/ids.csv" | tr '\n' ' ' | grep -q "^#trainee A-17 #session 2026.11.27_3 $"; then
+    pass "--trainee and --session are written into the log"
+else
+    fail "--trainee/--session" "$(head -1 "$TMP/err_ids") $(head -5 "$TMP/ids.csv" | tr '\n' ' ')"
+fi
+for args in "--trainee a,b" "--session $(printf 'x%.0s' $(seq 65))" "--trainee" "--rescore"; do
+    # shellcheck disable=SC2086
+    "$BIN" run "$TUT" -o "$TMP/o_ids2" $args >/dev/null 2>"$TMP/err_ids2"
+    rc=$?
+    if [ $rc = 2 ]; then pass "run ${args:0:20}...: usage error, exit 2"; else fail "run $args" "exit $rc"; fi
+done
 
 # Bad input: exit 1, one line naming the file and line or field, no report.json.
 bad() { # name, sed expression on the tutorial, expected message (grep -E)
@@ -241,6 +323,19 @@ bad negative_speed 's/speed = 0.02, depth/speed = -0.02, depth/' \
 bad no_entry 's/^    entry = .*$//' "no_entry.lua:[0-9]+: ns.scenario: missing field 'entry'"
 bad bad_tolerance 's/tolerance = 2e-3/tolerance = -1/' \
     "bad_tolerance.lua:[0-9]+: ns.scenario: targets\[1\]: tolerance must be a number > 0"
+# Names that would break trajectory.csv's header or a log line (engine/names.h): refused by
+# ns.scenario with the script's line, and again by the engine when a scenario edits its table.
+NAME_RULE="name must be 1 to 64 bytes of printable ASCII without ',', '\"' or '\\\\' \(spaces are fine\)"
+bad name_comma 's/{ name = "target", at/{ name = "tar,get", at/' \
+    "name_comma.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE \(got 'tar,get': byte 4 is ','\)"
+bad name_newline 's/{ name = "target", at/{ name = "tar\\nget", at/' \
+    "name_newline.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE \(got 'tar\?get': byte 4 is 0x0a\)"
+bad name_marker 's/^    targets = {$/    markers = { { name = "m\\"1", at = { 0, 0, 0.01 } } }, targets = {/' \
+    "name_marker.lua:[0-9]+: ns.scenario: markers\[1\]: $NAME_RULE \(got 'm\"1': byte 2 is '\"'\)"
+bad name_long "s/{ name = \"target\", at/{ name = \"$(printf 'x%.0s' $(seq 65))\", at/" \
+    "name_long.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE .*it is 65 bytes long"
+bad name_edited 's/^return ns.scenario {$/local sc = ns.scenario {/; $a sc.targets[1].name = "a\\nb"; return sc' \
+    "name_edited.lua:[0-9]+: ns.scenario: targets\[1\]: $NAME_RULE \(got 'a\?b': byte 2 is 0x0a\)"
 # Errors that only show while running: the output folder is then created, so the check that no
 # report.json is left (and that an earlier run's is gone) can fail. The runs draw frames and a
 # video too: none of them (nor their temporary names) may be left either.
@@ -350,7 +445,7 @@ sed 's/act.wait { time = 0.2 }/act.retract { speed = 0.04 }; act.next_needle { p
 sed '/^    script = function()$/,/^    end,$/d' "$TMP/two_needles.lua" >"$TMP/two_needles_noscript.lua"
 "$BIN" run "$TMP/two_needles.lua" -o "$TMP/tn1" --record "$TMP/tn.csv" --quiet >/dev/null 2>"$TMP/err_tn1"
 rc=$?
-"$BIN" run "$TMP/two_needles_noscript.lua" -o "$TMP/tn2" --replay "$TMP/tn.csv" --quiet >/dev/null 2>"$TMP/err_tn2"
+"$BIN" run "$TMP/two_needles_noscript.lua" -o "$TMP/tn2" --replay "$TMP/tn.csv" --rescore --quiet >/dev/null 2>"$TMP/err_tn2"
 if [ $rc = 0 ] && grep -q "next_needle:0.01" "$TMP/tn.csv" && python3 - "$TMP/tn1/report.json" <<'PY' 2>"$TMP/py_tn"; then
 import json, sys
 r = json.load(open(sys.argv[1]))

@@ -1,0 +1,21 @@
+/* Names that end up in CSV headers (trajectory.csv's marker columns), JSON and log lines:
+ * targets, markers, obstacles, regions and materials. A name is 1 to NS_LIMIT_NAME_LENGTH bytes
+ * (sim/ns_limits.h) of printable ASCII (0x20-0x7e: spaces are fine) without ',', '"' or '\'.
+ * scripts/needlesim.lua refuses other names where a scenario gives them, with its file and
+ * line; this checks them again where the engine reads them (a scenario may have replaced the
+ * module's checks). */
+#ifndef NS_NAMES_H
+#define NS_NAMES_H
+
+#include "run_spec.h"
+#include "scenario.h"
+
+/* 0 when name follows the rule; else -1 with what is wrong in why ("byte 3 is 0x0a"). */
+int ns_name_check(const char *name, char *why, int why_sz);
+
+/* Every name of the scenario's regions and of the run's targets, markers and obstacles: 0, or
+ * -1 with "file:line: ns.scenario: markers[2] name must be ... (got '...': byte 3 is 0x0a)"
+ * in err (the place of the ns.scenario{} call). */
+int ns_names_check_run(const NsScenario *sc, const NsRunSpec *spec, char *err, int err_sz);
+
+#endif
