@@ -252,6 +252,92 @@ static int within(double v, double limit, const char *column, const char *unit, 
     return -1;
 }
 
+/* One row of a log (line, split in place), the controls of step `step`; 0, or -1 with
+ * "path:line: ..." in err. */
+static int parse_row(char *line, const char *path, long lineno, long step, double dt, NsControl *c,
+                     char *err, int err_sz)
+{
+    int rc = 0;
+    /* Split into 7 fields. */
+    char *field[7];
+    int nf = 0;
+    char *p = line;
+    field[nf++] = p;
+    for (; *p; p++)
+        if (*p == ',') {
+            *p = '\0';
+            if (nf == 7) {
+                nf++;
+                break;
+            }
+            field[nf++] = p + 1;
+        }
+    if (nf != 7) {
+        ns_set_err(err, err_sz, "%s:%ld: expected 7 comma-separated fields (%s), got %s", path,
+                   lineno, NS_CONTROL_LOG_HEADER, nf > 7 ? "more" : "fewer");
+        return -1;
+    }
+    double v[6];
+    for (int k = 0; k < 6 && rc == 0; k++) {
+        char *end;
+        errno = 0;
+        v[k] = strtod(field[k], &end);
+        /* Decimal numbers only (no hex floats, spaces or "inf"); tiny values that
+         * underflow to subnormals are kept (strtod's ERANGE): they round-trip. */
+        size_t len = strlen(field[k]);
+        if (len == 0 || strspn(field[k], "0123456789+-.eE") != len || *end != '\0' ||
+            !isfinite(v[k])) {
+            ns_set_err(err, err_sz, "%s:%ld: %s must be a finite number (got '%s')", path, lineno,
+                       columns[k], field[k]);
+            rc = -1;
+        }
+    }
+    if (rc)
+        return -1;
+    if (fabs(v[0] - (double)step * dt) > 1e-3 * dt) {
+        ns_set_err(err, err_sz,
+                   "%s:%ld: t_s is %.9g but row %ld of a run stepping by dt = %g s is at "
+                   "t = %.9g s",
+                   path, lineno, v[0], step + 1, dt, (double)step * dt);
+        return -1;
+    }
+    /* Physical bounds (ns_limits.h): a row is one step's work, and that is bounded. */
+    rc = within(v[1], NS_LIMIT_INSERT_SPEED, columns[1], "m/s", path, lineno, err, err_sz);
+    for (int k = 2; k < 5 && rc == 0; k++)
+        rc = within(v[k], NS_LIMIT_BASE_SPEED, columns[k], "m/s", path, lineno, err, err_sz);
+    if (rc == 0)
+        rc = within(v[5], NS_LIMIT_TWIST_RATE, columns[5], "rad/s", path, lineno, err, err_sz);
+    if (rc)
+        return -1;
+    int drop = 0, next = 0;
+    NsEntry entry;
+    memset(&entry, 0, sizeof entry);
+    if (strcmp(field[6], "drop_seed") == 0) {
+        drop = 1;
+    } else if (strncmp(field[6], "next_needle:", 12) == 0) {
+        next = 1;
+        if (parse_entry(field[6] + 12, &entry)) {
+            ns_set_err(err, err_sz,
+                       "%s:%ld: next_needle: expected px;py;pz;dx;dy;dz[;bx;by;bz] (finite "
+                       "numbers, the direction not zero)",
+                       path, lineno);
+            return -1;
+        }
+    } else if (field[6][0] != '\0') {
+        ns_set_err(err, err_sz,
+                   "%s:%ld: unknown event '%s' (known: drop_seed, next_needle:..., or empty)", path,
+                   lineno, field[6]);
+        return -1;
+    }
+    c->v_insert = v[1];
+    memcpy(c->v_base, v + 2, sizeof c->v_base);
+    c->twist_rate = v[5];
+    c->drop_seed = drop;
+    c->next_needle = next;
+    c->entry = entry;
+    return 0;
+}
+
 int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz)
 {
     memset(log, 0, sizeof *log);
@@ -329,60 +415,6 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
             rc = -1;
             break;
         }
-        /* Split into 7 fields. */
-        char *field[7];
-        int nf = 0;
-        char *p = line;
-        field[nf++] = p;
-        for (; *p; p++)
-            if (*p == ',') {
-                *p = '\0';
-                if (nf == 7) {
-                    nf++;
-                    break;
-                }
-                field[nf++] = p + 1;
-            }
-        if (nf != 7) {
-            ns_set_err(err, err_sz, "%s:%ld: expected 7 comma-separated fields (%s), got %s", path,
-                       lineno, NS_CONTROL_LOG_HEADER, nf > 7 ? "more" : "fewer");
-            rc = -1;
-            break;
-        }
-        double v[6];
-        for (int k = 0; k < 6 && rc == 0; k++) {
-            char *end;
-            errno = 0;
-            v[k] = strtod(field[k], &end);
-            /* Decimal numbers only (no hex floats, spaces or "inf"); tiny values that
-             * underflow to subnormals are kept (strtod's ERANGE): they round-trip. */
-            size_t len = strlen(field[k]);
-            if (len == 0 || strspn(field[k], "0123456789+-.eE") != len || *end != '\0' ||
-                !isfinite(v[k])) {
-                ns_set_err(err, err_sz, "%s:%ld: %s must be a finite number (got '%s')", path,
-                           lineno, columns[k], field[k]);
-                rc = -1;
-            }
-        }
-        if (rc)
-            break;
-        long k = lineno - header_line - 1; /* the step */
-        if (fabs(v[0] - (double)k * dt) > 1e-3 * dt) {
-            ns_set_err(err, err_sz,
-                       "%s:%ld: t_s is %.9g but row %ld of a run stepping by dt = %g s is at "
-                       "t = %.9g s",
-                       path, lineno, v[0], k + 1, dt, (double)k * dt);
-            rc = -1;
-            break;
-        }
-        /* Physical bounds (ns_limits.h): a row is one step's work, and that is bounded. */
-        rc = within(v[1], NS_LIMIT_INSERT_SPEED, columns[1], "m/s", path, lineno, err, err_sz);
-        for (int k = 2; k < 5 && rc == 0; k++)
-            rc = within(v[k], NS_LIMIT_BASE_SPEED, columns[k], "m/s", path, lineno, err, err_sz);
-        if (rc == 0)
-            rc = within(v[5], NS_LIMIT_TWIST_RATE, columns[5], "rad/s", path, lineno, err, err_sz);
-        if (rc)
-            break;
         if (log->n >= NS_LIMIT_STEPS) {
             ns_set_err(err, err_sz,
                        "%s:%ld: more than %ld rows (NS_LIMIT_STEPS, the most steps a run takes)",
@@ -390,25 +422,8 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
             rc = -1;
             break;
         }
-        int drop = 0, next = 0;
-        NsEntry entry;
-        memset(&entry, 0, sizeof entry);
-        if (strcmp(field[6], "drop_seed") == 0) {
-            drop = 1;
-        } else if (strncmp(field[6], "next_needle:", 12) == 0) {
-            next = 1;
-            if (parse_entry(field[6] + 12, &entry)) {
-                ns_set_err(err, err_sz,
-                           "%s:%ld: next_needle: expected px;py;pz;dx;dy;dz[;bx;by;bz] (finite "
-                           "numbers, the direction not zero)",
-                           path, lineno);
-                rc = -1;
-                break;
-            }
-        } else if (field[6][0] != '\0') {
-            ns_set_err(err, err_sz,
-                       "%s:%ld: unknown event '%s' (known: drop_seed, next_needle:..., or empty)",
-                       path, lineno, field[6]);
+        NsControl row;
+        if (parse_row(line, path, lineno, lineno - header_line - 1, dt, &row, err, err_sz)) {
             rc = -1;
             break;
         }
@@ -422,13 +437,7 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
             }
             log->rows = rows;
         }
-        NsControl *c = &log->rows[log->n++];
-        c->v_insert = v[1];
-        memcpy(c->v_base, v + 2, sizeof c->v_base);
-        c->twist_rate = v[5];
-        c->drop_seed = drop;
-        c->next_needle = next;
-        c->entry = entry;
+        log->rows[log->n++] = row;
     }
     if (rc == 0 && ferror(f)) {
         ns_set_err(err, err_sz, "%s: read error", path);

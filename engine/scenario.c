@@ -22,40 +22,16 @@
 #include "mesh_io.h"
 #include "ns_limits.h"
 #include "quality.h"
+#include "scenario_internal.h"
 #include "shape.h"
 
-#define WHERE_MAX 512
-/* CSG trees deeper than this are refused (a table that contains itself would recurse). */
-#define SHAPE_DEPTH_MAX 200
-
-static int cmp_int(const void *a, const void *b)
+int scn_cmp_int(const void *a, const void *b)
 {
     int x = *(const int *)a, y = *(const int *)b;
     return (x > y) - (x < y);
 }
 
-typedef struct Builder Builder;
-
-/* A Lua function used as a shape: called by the mesher through ns_shape_callback. */
-typedef struct LuaShapeFn {
-    Builder *b;
-    int ref; /* registry ref to the function */
-} LuaShapeFn;
-
-struct Builder {
-    NsScenario *sc;
-    lua_State *L;
-    char *err;
-    int err_sz;
-    LuaShapeFn **fns; /* (nfns) every function shape made, freed after meshing */
-    int nfns, capfns;
-    bool fn_failed; /* a function shape failed; fn_err says how */
-    char fn_err[1024];
-    bool have_bounds; /* ns.tissue.shapes{bounds = ...} was given */
-    double blo[3], bhi[3];
-};
-
-static char *dup_string(const char *s)
+char *scn_dup_string(const char *s)
 {
     if (!s)
         return NULL;
@@ -73,11 +49,7 @@ static double now_ms(void)
     return 1e3 * (double)ts.tv_sec + 1e-6 * (double)ts.tv_nsec;
 }
 
-#if defined(__GNUC__)
-__attribute__((format(printf, 2, 3)))
-#endif
-static int
-fail(Builder *b, const char *fmt, ...)
+int scn_fail(Builder *b, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -91,7 +63,7 @@ fail(Builder *b, const char *fmt, ...)
 /* t[key] and t[i] without metamethods, pushed, their type returned; nil when t is not a table.
  * A scenario may put metatables on the tables it returns (an erroring __index, a __len that
  * returns 1.5): none of that code may run here. Everything below reads through these. */
-static int rawfield(lua_State *L, int idx, const char *key)
+int scn_rawfield(lua_State *L, int idx, const char *key)
 {
     idx = lua_absindex(L, idx);
     if (!lua_istable(L, idx)) {
@@ -102,7 +74,7 @@ static int rawfield(lua_State *L, int idx, const char *key)
     return lua_rawget(L, idx);
 }
 
-static int rawindex(lua_State *L, int idx, lua_Integer i)
+int scn_rawindex(lua_State *L, int idx, lua_Integer i)
 {
     idx = lua_absindex(L, idx);
     if (!lua_istable(L, idx)) {
@@ -118,33 +90,33 @@ static const char *kind_of(lua_State *L, int idx, char *buf, size_t n)
     buf[0] = '\0';
     if (lua_type(L, idx) != LUA_TTABLE || !lua_getmetatable(L, idx))
         return buf;
-    if (rawfield(L, -1, "__ns_kind") == LUA_TSTRING)
+    if (scn_rawfield(L, -1, "__ns_kind") == LUA_TSTRING)
         snprintf(buf, n, "%s", lua_tostring(L, -1));
     lua_pop(L, 2);
     return buf;
 }
 
-static bool is_kind(lua_State *L, int idx, const char *kind)
+bool scn_is_kind(lua_State *L, int idx, const char *kind)
 {
     char buf[32];
     return strcmp(kind_of(L, idx, buf, sizeof buf), kind) == 0;
 }
 
 /* The table's `where` ("file:line"), or the fallback. */
-static void get_where(lua_State *L, int idx, const char *fallback, char *out, size_t n)
+void scn_get_where(lua_State *L, int idx, const char *fallback, char *out, size_t n)
 {
-    if (rawfield(L, idx, "where") == LUA_TSTRING)
+    if (scn_rawfield(L, idx, "where") == LUA_TSTRING)
         snprintf(out, n, "%s", lua_tostring(L, -1));
     else
         snprintf(out, n, "%s", fallback);
     lua_pop(L, 1);
 }
 
-static int get_string(Builder *b, int idx, const char *key, const char *where, const char *ctor,
-                      bool required, char **out)
+int scn_get_string(Builder *b, int idx, const char *key, const char *where, const char *ctor,
+                   bool required, char **out)
 {
     lua_State *L = b->L;
-    int t = rawfield(L, idx, key);
+    int t = scn_rawfield(L, idx, key);
     *out = NULL;
     if (t == LUA_TNIL && !required) {
         lua_pop(L, 1);
@@ -152,52 +124,52 @@ static int get_string(Builder *b, int idx, const char *key, const char *where, c
     }
     if (t != LUA_TSTRING) {
         lua_pop(L, 1);
-        return fail(b, "%s: %s: %s must be a string (got %s)", where, ctor, key,
-                    lua_typename(L, t));
+        return scn_fail(b, "%s: %s: %s must be a string (got %s)", where, ctor, key,
+                        lua_typename(L, t));
     }
-    *out = dup_string(lua_tostring(L, -1));
+    *out = scn_dup_string(lua_tostring(L, -1));
     lua_pop(L, 1);
-    return *out ? 0 : fail(b, "%s: %s: out of memory", where, ctor);
+    return *out ? 0 : scn_fail(b, "%s: %s: out of memory", where, ctor);
 }
 
-static int get_number(Builder *b, int idx, const char *key, const char *where, const char *ctor,
-                      double *out)
+int scn_get_number(Builder *b, int idx, const char *key, const char *where, const char *ctor,
+                   double *out)
 {
     lua_State *L = b->L;
-    int t = rawfield(L, idx, key);
+    int t = scn_rawfield(L, idx, key);
     double x = lua_tonumber(L, -1);
     lua_pop(L, 1);
     if (t != LUA_TNUMBER || !isfinite(x))
-        return fail(b, "%s: %s: %s must be a finite number", where, ctor, key);
+        return scn_fail(b, "%s: %s: %s must be a finite number", where, ctor, key);
     *out = x;
     return 0;
 }
 
 /* A list of n finite numbers. */
-static int get_vector(Builder *b, int idx, const char *key, int n, const char *where,
-                      const char *ctor, double *out)
+int scn_get_vector(Builder *b, int idx, const char *key, int n, const char *where, const char *ctor,
+                   double *out)
 {
     lua_State *L = b->L;
-    if (rawfield(L, idx, key) != LUA_TTABLE) {
+    if (scn_rawfield(L, idx, key) != LUA_TTABLE) {
         lua_pop(L, 1);
-        return fail(b, "%s: %s: %s must be a list of %d numbers", where, ctor, key, n);
+        return scn_fail(b, "%s: %s: %s must be a list of %d numbers", where, ctor, key, n);
     }
     for (int i = 0; i < n; i++) {
-        int t = rawindex(L, -1, i + 1);
+        int t = scn_rawindex(L, -1, i + 1);
         out[i] = lua_tonumber(L, -1);
         lua_pop(L, 1);
         if (t != LUA_TNUMBER || !isfinite(out[i])) {
             lua_pop(L, 1);
-            return fail(b, "%s: %s: %s[%d] must be a finite number", where, ctor, key, i + 1);
+            return scn_fail(b, "%s: %s: %s[%d] must be a finite number", where, ctor, key, i + 1);
         }
     }
     lua_pop(L, 1);
     return 0;
 }
 
-static bool get_bool(lua_State *L, int idx, const char *key)
+bool scn_get_bool(lua_State *L, int idx, const char *key)
 {
-    rawfield(L, idx, key);
+    scn_rawfield(L, idx, key);
     bool v = lua_toboolean(L, -1);
     lua_pop(L, 1);
     return v;
@@ -210,34 +182,33 @@ const char *ns_material_model_name(NsElasticModel m)
     return m == NS_MODEL_NEOHOOKEAN ? "neohookean" : "corotational";
 }
 
-static void material_free(NsMaterial *m)
+void scn_material_free(NsMaterial *m)
 {
     free(m->name);
     m->name = NULL;
 }
 
 /* The material table at idx, used by the table described by (where, ctor). */
-static int material_from_lua(Builder *b, int idx, const char *where, const char *ctor,
-                             NsMaterial *m)
+int scn_material_from_lua(Builder *b, int idx, const char *where, const char *ctor, NsMaterial *m)
 {
     lua_State *L = b->L;
     memset(m, 0, sizeof *m);
     idx = lua_absindex(L, idx);
-    if (!is_kind(L, idx, "material"))
-        return fail(b,
-                    "%s: %s: material must be a material (ns.material{...} or "
-                    "ns.materials.<name>)",
-                    where, ctor);
+    if (!scn_is_kind(L, idx, "material"))
+        return scn_fail(b,
+                        "%s: %s: material must be a material (ns.material{...} or "
+                        "ns.materials.<name>)",
+                        where, ctor);
     char mwhere[WHERE_MAX];
-    get_where(L, idx, where, mwhere, sizeof mwhere);
+    scn_get_where(L, idx, where, mwhere, sizeof mwhere);
     const char *mc = "ns.material";
-    if (get_string(b, idx, "name", mwhere, mc, true, &m->name) ||
-        get_number(b, idx, "youngs", mwhere, mc, &m->youngs) ||
-        get_number(b, idx, "poisson", mwhere, mc, &m->poisson) ||
-        get_number(b, idx, "density", mwhere, mc, &m->density) ||
-        get_number(b, idx, "damping", mwhere, mc, &m->damping) ||
-        get_number(b, idx, "friction", mwhere, mc, &m->friction) ||
-        get_number(b, idx, "cut_force", mwhere, mc, &m->cut_force))
+    if (scn_get_string(b, idx, "name", mwhere, mc, true, &m->name) ||
+        scn_get_number(b, idx, "youngs", mwhere, mc, &m->youngs) ||
+        scn_get_number(b, idx, "poisson", mwhere, mc, &m->poisson) ||
+        scn_get_number(b, idx, "density", mwhere, mc, &m->density) ||
+        scn_get_number(b, idx, "damping", mwhere, mc, &m->damping) ||
+        scn_get_number(b, idx, "friction", mwhere, mc, &m->friction) ||
+        scn_get_number(b, idx, "cut_force", mwhere, mc, &m->cut_force))
         return -1;
     /* The same ranges the constructor checks (the table may have been changed since). */
     const char *bad = NULL;
@@ -250,41 +221,41 @@ static int material_from_lua(Builder *b, int idx, const char *where, const char 
     else if (!(m->damping >= 0) || !(m->friction >= 0) || !(m->cut_force >= 0))
         bad = "damping, friction and cut_force must be >= 0";
     if (bad)
-        return fail(b, "%s: %s: %s", mwhere, mc, bad);
+        return scn_fail(b, "%s: %s: %s", mwhere, mc, bad);
     char *model = NULL;
-    if (get_string(b, idx, "model", mwhere, mc, false, &model))
+    if (scn_get_string(b, idx, "model", mwhere, mc, false, &model))
         return -1;
     if (!model || strcmp(model, "corotational") == 0) {
         m->model = NS_MODEL_COROTATIONAL;
     } else if (strcmp(model, "neohookean") == 0) {
         m->model = NS_MODEL_NEOHOOKEAN;
     } else {
-        fail(b, "%s: %s: model must be 'corotational' or 'neohookean' (got '%s')", mwhere, mc,
-             model);
+        scn_fail(b, "%s: %s: model must be 'corotational' or 'neohookean' (got '%s')", mwhere, mc,
+                 model);
         free(model);
         return -1;
     }
     free(model);
-    int t = rawfield(L, idx, "membrane");
+    int t = scn_rawfield(L, idx, "membrane");
     if (t == LUA_TTABLE) {
         int mi = lua_gettop(L);
         m->has_membrane = true;
-        int rc =
-            get_number(b, mi, "thickness", mwhere, "ns.material: membrane", &m->membrane_thickness);
+        int rc = scn_get_number(b, mi, "thickness", mwhere, "ns.material: membrane",
+                                &m->membrane_thickness);
         if (rc == 0)
-            rc = get_number(b, mi, "cut_force", mwhere, "ns.material: membrane",
-                            &m->membrane_cut_force);
+            rc = scn_get_number(b, mi, "cut_force", mwhere, "ns.material: membrane",
+                                &m->membrane_cut_force);
         lua_pop(L, 1);
         if (rc)
             return -1;
         if (!(m->membrane_thickness > 0) || !(m->membrane_cut_force >= 0))
-            return fail(b, "%s: ns.material: membrane: thickness must be > 0 and cut_force >= 0",
-                        mwhere);
+            return scn_fail(
+                b, "%s: ns.material: membrane: thickness must be > 0 and cut_force >= 0", mwhere);
     } else {
         lua_pop(L, 1);
         if (t != LUA_TNIL)
-            return fail(b, "%s: ns.material: membrane must be a table {thickness, cut_force}",
-                        mwhere);
+            return scn_fail(b, "%s: ns.material: membrane must be a table {thickness, cut_force}",
+                            mwhere);
     }
     return 0;
 }
@@ -337,7 +308,7 @@ static NsShape *function_shape(Builder *b, int idx, const char *where)
         int cap = b->capfns ? 2 * b->capfns : 8;
         LuaShapeFn **fns = realloc(b->fns, (size_t)cap * sizeof *fns);
         if (!fns) {
-            fail(b, "%s: out of memory", where);
+            scn_fail(b, "%s: out of memory", where);
             return NULL;
         }
         b->fns = fns;
@@ -345,7 +316,7 @@ static NsShape *function_shape(Builder *b, int idx, const char *where)
     }
     LuaShapeFn *f = malloc(sizeof *f);
     if (!f) {
-        fail(b, "%s: out of memory", where);
+        scn_fail(b, "%s: out of memory", where);
         return NULL;
     }
     f->b = b;
@@ -358,40 +329,39 @@ static NsShape *function_shape(Builder *b, int idx, const char *where)
     NsShape *s = ns_shape_callback(lua_shape_eval, f, b->have_bounds ? b->blo : lo,
                                    b->have_bounds ? b->bhi : hi);
     if (!s)
-        fail(b, "%s: out of memory", where);
+        scn_fail(b, "%s: out of memory", where);
     return s;
 }
 
-static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const char *ctx,
-                               int depth);
+NsShape *scn_shape_from_lua(Builder *b, int idx, const char *ctx_where, const char *ctx, int depth);
 
 /* Converts the list field `key` of the shape table at idx into shapes (count in *n). */
-static NsShape **shape_list(Builder *b, int idx, const char *key, const char *where,
-                            const char *ctor, int depth, int *n)
+NsShape **scn_shape_list(Builder *b, int idx, const char *key, const char *where, const char *ctor,
+                         int depth, int *n)
 {
     lua_State *L = b->L;
     *n = 0;
-    if (rawfield(L, idx, key) != LUA_TTABLE) {
+    if (scn_rawfield(L, idx, key) != LUA_TTABLE) {
         lua_pop(L, 1);
-        fail(b, "%s: %s: %s must be a list of shapes", where, ctor, key);
+        scn_fail(b, "%s: %s: %s must be a list of shapes", where, ctor, key);
         return NULL;
     }
     int li = lua_gettop(L);
     lua_Integer count = (lua_Integer)lua_rawlen(L, li);
     if (count < 1 || count > 1000000) {
         lua_pop(L, 1);
-        fail(b, "%s: %s: needs at least one shape", where, ctor);
+        scn_fail(b, "%s: %s: needs at least one shape", where, ctor);
         return NULL;
     }
     NsShape **kids = calloc((size_t)count, sizeof *kids);
     if (!kids) {
         lua_pop(L, 1);
-        fail(b, "%s: out of memory", where);
+        scn_fail(b, "%s: out of memory", where);
         return NULL;
     }
     for (lua_Integer i = 0; i < count; i++) {
-        rawindex(L, li, i + 1);
-        kids[i] = shape_from_lua(b, -1, where, ctor, depth + 1);
+        scn_rawindex(L, li, i + 1);
+        kids[i] = scn_shape_from_lua(b, -1, where, ctor, depth + 1);
         lua_pop(L, 1);
         if (!kids[i]) {
             for (lua_Integer k = 0; k < i; k++)
@@ -406,41 +376,40 @@ static NsShape **shape_list(Builder *b, int idx, const char *key, const char *wh
     return kids;
 }
 
-static NsShape *shape_field(Builder *b, int idx, const char *key, const char *where,
-                            const char *ctor, int depth)
+NsShape *scn_shape_field(Builder *b, int idx, const char *key, const char *where, const char *ctor,
+                         int depth)
 {
-    rawfield(b->L, idx, key);
-    NsShape *s = shape_from_lua(b, -1, where, ctor, depth + 1);
+    scn_rawfield(b->L, idx, key);
+    NsShape *s = scn_shape_from_lua(b, -1, where, ctor, depth + 1);
     lua_pop(b->L, 1);
     return s;
 }
 
 /* The shape (a table made by ns.shape.* or a Lua function) at idx, inside the table
  * described by (ctx_where, ctx). Returns a new reference, or NULL with b->err set. */
-static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const char *ctx,
-                               int depth)
+NsShape *scn_shape_from_lua(Builder *b, int idx, const char *ctx_where, const char *ctx, int depth)
 {
     lua_State *L = b->L;
     idx = lua_absindex(L, idx);
     if (depth > SHAPE_DEPTH_MAX) {
-        fail(b, "%s: %s: shapes nested more than %d deep (does a shape contain itself?)", ctx_where,
-             ctx, SHAPE_DEPTH_MAX);
+        scn_fail(b, "%s: %s: shapes nested more than %d deep (does a shape contain itself?)",
+                 ctx_where, ctx, SHAPE_DEPTH_MAX);
         return NULL;
     }
     if (!lua_checkstack(L, 8)) {
-        fail(b, "%s: %s: out of memory", ctx_where, ctx);
+        scn_fail(b, "%s: %s: out of memory", ctx_where, ctx);
         return NULL;
     }
     if (lua_type(L, idx) == LUA_TFUNCTION)
         return function_shape(b, idx, ctx_where);
-    if (!is_kind(L, idx, "shape")) {
-        fail(b, "%s: %s: expected a shape (ns.shape.* or function(x, y, z)), got a %s", ctx_where,
-             ctx, luaL_typename(L, idx));
+    if (!scn_is_kind(L, idx, "shape")) {
+        scn_fail(b, "%s: %s: expected a shape (ns.shape.* or function(x, y, z)), got a %s",
+                 ctx_where, ctx, luaL_typename(L, idx));
         return NULL;
     }
     char where[WHERE_MAX], type[32];
-    get_where(L, idx, ctx_where, where, sizeof where);
-    if (rawfield(L, idx, "type") == LUA_TSTRING)
+    scn_get_where(L, idx, ctx_where, where, sizeof where);
+    if (scn_rawfield(L, idx, "type") == LUA_TSTRING)
         snprintf(type, sizeof type, "%s", lua_tostring(L, -1));
     else
         type[0] = '\0';
@@ -451,38 +420,38 @@ static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const
     NsShape *s = NULL;
     double c[3] = {0}, d[3] = {0}, r = 0;
     if (strcmp(type, "sphere") == 0) {
-        if (get_vector(b, idx, "center", 3, where, ctor, c) ||
-            get_number(b, idx, "radius", where, ctor, &r))
+        if (scn_get_vector(b, idx, "center", 3, where, ctor, c) ||
+            scn_get_number(b, idx, "radius", where, ctor, &r))
             return NULL;
         if (!(r > 0)) {
-            fail(b, "%s: %s: radius must be > 0", where, ctor);
+            scn_fail(b, "%s: %s: radius must be > 0", where, ctor);
             return NULL;
         }
         s = ns_shape_sphere(c, r);
     } else if (strcmp(type, "ellipsoid") == 0 || strcmp(type, "box") == 0) {
         bool box = type[0] == 'b';
         const char *dk = box ? "size" : "radii";
-        if (get_vector(b, idx, "center", 3, where, ctor, c) ||
-            get_vector(b, idx, dk, 3, where, ctor, d))
+        if (scn_get_vector(b, idx, "center", 3, where, ctor, c) ||
+            scn_get_vector(b, idx, dk, 3, where, ctor, d))
             return NULL;
         if (!(d[0] > 0 && d[1] > 0 && d[2] > 0)) {
-            fail(b, "%s: %s: %s must be > 0", where, ctor, dk);
+            scn_fail(b, "%s: %s: %s must be > 0", where, ctor, dk);
             return NULL;
         }
         s = box ? ns_shape_box(c, d) : ns_shape_ellipsoid(c, d);
     } else if (strcmp(type, "cylinder") == 0 || strcmp(type, "capsule") == 0) {
-        if (get_vector(b, idx, "a", 3, where, ctor, c) ||
-            get_vector(b, idx, "b", 3, where, ctor, d) ||
-            get_number(b, idx, "radius", where, ctor, &r))
+        if (scn_get_vector(b, idx, "a", 3, where, ctor, c) ||
+            scn_get_vector(b, idx, "b", 3, where, ctor, d) ||
+            scn_get_number(b, idx, "radius", where, ctor, &r))
             return NULL;
         if (!(r > 0)) {
-            fail(b, "%s: %s: radius must be > 0", where, ctor);
+            scn_fail(b, "%s: %s: radius must be > 0", where, ctor);
             return NULL;
         }
         s = type[1] == 'y' ? ns_shape_cylinder(c, d, r) : ns_shape_capsule(c, d, r);
     } else if (strcmp(type, "union") == 0 || strcmp(type, "intersection") == 0) {
         int n;
-        NsShape **kids = shape_list(b, idx, "children", where, ctor, depth, &n);
+        NsShape **kids = scn_shape_list(b, idx, "children", where, ctor, depth, &n);
         if (!kids)
             return NULL;
         s = type[0] == 'u' ? ns_shape_union(kids, n) : ns_shape_intersection(kids, n);
@@ -490,10 +459,10 @@ static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const
             ns_shape_release(kids[i]);
         free(kids);
     } else if (strcmp(type, "difference") == 0) {
-        NsShape *a = shape_field(b, idx, "a", where, ctor, depth);
+        NsShape *a = scn_shape_field(b, idx, "a", where, ctor, depth);
         if (!a)
             return NULL;
-        NsShape *bb = shape_field(b, idx, "b", where, ctor, depth);
+        NsShape *bb = scn_shape_field(b, idx, "b", where, ctor, depth);
         if (!bb) {
             ns_shape_release(a);
             return NULL;
@@ -503,448 +472,26 @@ static NsShape *shape_from_lua(Builder *b, int idx, const char *ctx_where, const
         ns_shape_release(bb);
     } else if (strcmp(type, "transform") == 0) {
         double rot[9] = {0}, t[3] = {0}, k = 0;
-        if (get_vector(b, idx, "rotation", 9, where, ctor, rot) ||
-            get_vector(b, idx, "translate", 3, where, ctor, t) ||
-            get_number(b, idx, "scale", where, ctor, &k))
+        if (scn_get_vector(b, idx, "rotation", 9, where, ctor, rot) ||
+            scn_get_vector(b, idx, "translate", 3, where, ctor, t) ||
+            scn_get_number(b, idx, "scale", where, ctor, &k))
             return NULL;
         if (!(k > 0)) {
-            fail(b, "%s: %s: scale must be > 0", where, ctor);
+            scn_fail(b, "%s: %s: scale must be > 0", where, ctor);
             return NULL;
         }
-        NsShape *child = shape_field(b, idx, "child", where, ctor, depth);
+        NsShape *child = scn_shape_field(b, idx, "child", where, ctor, depth);
         if (!child)
             return NULL;
         s = ns_shape_transform(child, rot, t, k);
         ns_shape_release(child);
     } else {
-        fail(b, "%s: unknown shape type '%s'", where, type);
+        scn_fail(b, "%s: unknown shape type '%s'", where, type);
         return NULL;
     }
     if (!s)
-        fail(b, "%s: %s: out of memory", where, ctor);
+        scn_fail(b, "%s: %s: out of memory", where, ctor);
     return s;
-}
-
-/* ---- tissue -------------------------------------------------------------------------------- */
-
-static int alloc_regions(Builder *b, int n, const char *where)
-{
-    b->sc->regions = calloc((size_t)n, sizeof *b->sc->regions);
-    if (!b->sc->regions)
-        return fail(b, "%s: out of memory", where);
-    b->sc->region_count = n;
-    return 0;
-}
-
-/* Runs the mesher and turns its failure into one line naming the tissue: a function shape's
- * own error first (it is why the mesher stopped), then the mesher's message. */
-static int run_mesher(Builder *b, const NsMesherDef *def, const char *where, const char *ctor)
-{
-    char merr[512];
-    NsScenario *sc = b->sc;
-    if (ns_mesher_stuff(def, &sc->mesh, &sc->mesher_stats, merr, (int)sizeof merr) != 0) {
-        if (b->fn_failed)
-            return fail(b, "%s", b->fn_err);
-        return fail(b, "%s: %s: resolution %g m: %s", where, ctor, def->spacing, merr);
-    }
-    if (b->fn_failed) /* a failure the mesher did not notice must not pass either */
-        return fail(b, "%s", b->fn_err);
-    sc->meshed = true;
-    return 0;
-}
-
-static const char *const face_names[6] = {"xmin", "xmax", "ymin", "ymax", "zmin", "zmax"};
-
-static int build_box(Builder *b, int ti, const char *where)
-{
-    lua_State *L = b->L;
-    NsScenario *sc = b->sc;
-    const char *ctor = "ns.tissue.box";
-    double size[3] = {0}, origin[3] = {0}, h = 0;
-    if (get_vector(b, ti, "size", 3, where, ctor, size) ||
-        get_vector(b, ti, "origin", 3, where, ctor, origin) ||
-        get_number(b, ti, "resolution", where, ctor, &h))
-        return -1;
-    if (!(size[0] > 0 && size[1] > 0 && size[2] > 0))
-        return fail(b, "%s: %s: size must be > 0", where, ctor);
-    if (!(h > 0))
-        return fail(b, "%s: %s: resolution must be > 0", where, ctor);
-    sc->resolution = h;
-    if (alloc_regions(b, 1, where))
-        return -1;
-    NsRegionInfo *reg = &sc->regions[0];
-    reg->name = dup_string("tissue");
-    reg->tag = 1;
-    rawfield(L, ti, "material");
-    int rc = material_from_lua(b, -1, where, ctor, &reg->material);
-    lua_pop(L, 1);
-    if (rc)
-        return -1;
-    if (!reg->name)
-        return fail(b, "%s: out of memory", where);
-
-    /* Which faces are held. */
-    bool fixed_face[6] = {false};
-    if (rawfield(L, ti, "fixed_faces") == LUA_TTABLE) {
-        lua_Integer n = (lua_Integer)lua_rawlen(L, -1);
-        for (lua_Integer i = 1; i <= n; i++) {
-            rawindex(L, -1, i);
-            const char *f = lua_tostring(L, -1);
-            int k = 0;
-            while (k < 6 && !(f && strcmp(f, face_names[k]) == 0))
-                k++;
-            lua_pop(L, 1);
-            if (k == 6) {
-                lua_pop(L, 1);
-                return fail(b,
-                            "%s: %s: fixed_faces[%d] must be one of xmin, xmax, ymin, ymax, "
-                            "zmin, zmax",
-                            where, ctor, (int)i);
-            }
-            fixed_face[k] = true;
-        }
-    }
-    lua_pop(L, 1);
-
-    double center[3], hi[3];
-    for (int a = 0; a < 3; a++) {
-        center[a] = origin[a] + 0.5 * size[a];
-        hi[a] = origin[a] + size[a];
-    }
-    NsShape *shape = ns_shape_box(center, size);
-    if (!shape)
-        return fail(b, "%s: out of memory", where);
-    NsMesherRegion region = {.shape = shape, .fixed = false};
-    NsMesherDef def = ns_default_mesher_def();
-    def.spacing = h;
-    def.regions = &region;
-    def.region_count = 1;
-    /* Anchor the lattice at the min corner: the min faces lie on lattice planes and stay
-     * flat without warping. */
-    memcpy(def.lo, origin, sizeof def.lo);
-    memcpy(def.hi, hi, sizeof def.hi);
-    rc = run_mesher(b, &def, where, ctor);
-    ns_shape_release(shape);
-    if (rc)
-        return -1;
-
-    /* Hold the nodes on the fixed faces. The min faces are exact lattice planes; the max
-     * faces are found by bisection to ~h 2^-40, far inside this tolerance. */
-    double tol = 1e-6 * h;
-    NsMesh *m = &sc->mesh;
-    for (int v = 0; v < m->node_slots; v++) {
-        if (!ns_mesh_node_alive(m, v))
-            continue;
-        for (int k = 0; k < 6; k++) {
-            int axis = k / 2;
-            double plane = (k % 2) ? hi[axis] : origin[axis];
-            if (fixed_face[k] && fabs(m->u[3 * v + axis] - plane) <= tol)
-                m->flags[v] |= NS_NODE_FIXED;
-        }
-    }
-    return 0;
-}
-
-static int build_shapes(Builder *b, int ti, const char *where)
-{
-    lua_State *L = b->L;
-    NsScenario *sc = b->sc;
-    const char *ctor = "ns.tissue.shapes";
-    double h = 0;
-    if (get_number(b, ti, "resolution", where, ctor, &h))
-        return -1;
-    if (!(h > 0))
-        return fail(b, "%s: %s: resolution must be > 0", where, ctor);
-    sc->resolution = h;
-
-    if (rawfield(L, ti, "bounds") == LUA_TTABLE) {
-        int bi = lua_gettop(L);
-        rawindex(L, bi, 1);
-        rawindex(L, bi, 2);
-        b->have_bounds = lua_istable(L, -2) && lua_istable(L, -1);
-        for (int a = 0; b->have_bounds && a < 3; a++) {
-            rawindex(L, -2, a + 1);
-            rawindex(L, -2, a + 1);
-            b->blo[a] = lua_tonumber(L, -2);
-            b->bhi[a] = lua_tonumber(L, -1);
-            lua_pop(L, 2);
-            if (!(isfinite(b->blo[a]) && isfinite(b->bhi[a]) && b->blo[a] < b->bhi[a]))
-                b->have_bounds = false;
-        }
-        lua_pop(L, 2);
-        if (!b->have_bounds) {
-            lua_pop(L, 1);
-            return fail(b,
-                        "%s: %s: bounds must be {{x0, y0, z0}, {x1, y1, z1}} with x0 < x1, "
-                        "y0 < y1, z0 < z1",
-                        where, ctor);
-        }
-    }
-    lua_pop(L, 1);
-
-    if (rawfield(L, ti, "regions") != LUA_TTABLE) {
-        lua_pop(L, 1);
-        return fail(b, "%s: %s: regions must be a list of regions", where, ctor);
-    }
-    int ri = lua_gettop(L);
-    lua_Integer n = (lua_Integer)lua_rawlen(L, ri);
-    if (n < 1 || n > 65535) {
-        lua_pop(L, 1);
-        return fail(b, "%s: %s: regions must be a list of 1 to 65535 regions", where, ctor);
-    }
-    NsMesherRegion *mr = calloc((size_t)n, sizeof *mr);
-    if (!mr) {
-        lua_pop(L, 1);
-        return fail(b, "%s: out of memory", where);
-    }
-    if (alloc_regions(b, (int)n, where)) {
-        free(mr);
-        lua_pop(L, 1);
-        return -1;
-    }
-    int rc = 0;
-    for (lua_Integer i = 0; i < n && rc == 0; i++) {
-        char rctx[96];
-        snprintf(rctx, sizeof rctx, "%s: regions[%d]", ctor, (int)(i + 1));
-        rawindex(L, ri, i + 1);
-        int gi = lua_gettop(L);
-        NsRegionInfo *reg = &sc->regions[i];
-        reg->tag = (int)i + 1;
-        if (!lua_istable(L, gi)) {
-            rc = fail(b, "%s: %s must be a table {name, shape, material, fixed}", where, rctx);
-        } else {
-            rc = get_string(b, gi, "name", where, rctx, true, &reg->name);
-            if (rc == 0) {
-                rawfield(L, gi, "material");
-                rc = material_from_lua(b, -1, where, rctx, &reg->material);
-                lua_pop(L, 1);
-            }
-            if (rc == 0) {
-                reg->fixed = get_bool(L, gi, "fixed");
-                mr[i].fixed = reg->fixed;
-                mr[i].shape = shape_field(b, gi, "shape", where, rctx, 0);
-                if (!mr[i].shape)
-                    rc = -1;
-            }
-            if (rc == 0) {
-                double lo[3], hi[3];
-                bool ok = ns_shape_bounds(mr[i].shape, lo, hi);
-                for (int a = 0; ok && a < 3; a++)
-                    ok = isfinite(lo[a]) && isfinite(hi[a]);
-                if (!ok && !b->have_bounds)
-                    rc = fail(b,
-                              "%s: %s: the extent of region '%s' is unknown (it uses a Lua "
-                              "function shape): give bounds = {{x0, y0, z0}, {x1, y1, z1}}",
-                              where, ctor, reg->name);
-            }
-        }
-        lua_pop(L, 1);
-    }
-    lua_pop(L, 1);
-
-    if (rc == 0) {
-        NsMesherDef def = ns_default_mesher_def();
-        def.spacing = h;
-        def.regions = mr;
-        def.region_count = (int)n;
-        if (b->have_bounds) {
-            memcpy(def.lo, b->blo, sizeof def.lo);
-            memcpy(def.hi, b->bhi, sizeof def.hi);
-        }
-        rc = run_mesher(b, &def, where, ctor);
-    }
-    for (lua_Integer i = 0; i < n; i++)
-        ns_shape_release((NsShape *)mr[i].shape);
-    free(mr);
-    return rc;
-}
-
-static int build_file(Builder *b, int ti, const char *where)
-{
-    lua_State *L = b->L;
-    NsScenario *sc = b->sc;
-    const char *ctor = "ns.tissue.file";
-    char *rel = NULL;
-    if (get_string(b, ti, "path", where, ctor, true, &rel))
-        return -1;
-    /* Relative paths are relative to the scenario's folder, not the working directory. */
-    const char *dir = ns_lua_scenario_dir(sc->lua);
-    size_t need = strlen(dir) + strlen(rel) + 2;
-    sc->mesh_path = malloc(need);
-    if (!sc->mesh_path) {
-        free(rel);
-        return fail(b, "%s: out of memory", where);
-    }
-    if (rel[0] == '/' || strcmp(dir, ".") == 0)
-        snprintf(sc->mesh_path, need, "%s", rel);
-    else
-        snprintf(sc->mesh_path, need, "%s/%s", dir, rel);
-    free(rel);
-
-    struct stat st;
-    if (stat(sc->mesh_path, &st) != 0)
-        return fail(b, "%s: %s: cannot open '%s': %s", where, ctor, sc->mesh_path, strerror(errno));
-    if (S_ISDIR(st.st_mode))
-        return fail(b, "%s: %s: cannot open '%s': Is a directory", where, ctor, sc->mesh_path);
-    /* A FIFO would block for ever and /dev/zero never end: regular files of a bounded size
-     * only (sim/ns_limits.h; the reader checks again on the descriptor it opens). */
-    if (!S_ISREG(st.st_mode))
-        return fail(b, "%s: %s: cannot read '%s': not a regular file", where, ctor, sc->mesh_path);
-    if ((long long)st.st_size > NS_LIMIT_MESH_FILE_BYTES)
-        return fail(b, "%s: %s: '%s' has %lld bytes, more than a mesh file may have (%lld)", where,
-                    ctor, sc->mesh_path, (long long)st.st_size,
-                    (long long)NS_LIMIT_MESH_FILE_BYTES);
-    char merr[512];
-    if (ns_mesh_read_msh(sc->mesh_path, &sc->mesh, merr, (int)sizeof merr) != 0)
-        return fail(b, "%s: %s: %s", where, ctor, merr);
-    NsMesh *m = &sc->mesh;
-    if (ns_mesh_compact(m) != 0)
-        return fail(b, "%s: out of memory", where);
-
-    /* Physical tags present (mesh region r is tag r + 1), distinct and ascending. Sorted, not
-     * indexed by tag: a tag may be as large as INT_MAX. */
-    int *present = malloc((size_t)(m->tet_slots > 0 ? m->tet_slots : 1) * sizeof *present);
-    if (!present)
-        return fail(b, "%s: out of memory", where);
-    int count = 0;
-    for (int t = 0; t < m->tet_slots; t++)
-        if (ns_mesh_tet_alive(m, t))
-            present[count++] = m->tet_region[t];
-    if (count == 0) {
-        free(present);
-        return fail(b, "%s: %s: '%s' has no tetrahedra", where, ctor, sc->mesh_path);
-    }
-    qsort(present, (size_t)count, sizeof *present, cmp_int);
-    int distinct = 0;
-    for (int i = 0; i < count; i++)
-        if (i == 0 || present[i] != present[distinct - 1])
-            present[distinct++] = present[i];
-    count = distinct;
-    if (alloc_regions(b, count, where)) {
-        free(present);
-        return -1;
-    }
-
-    rawfield(L, ti, "regions");
-    rawfield(L, ti, "names");
-    rawfield(L, ti, "fixed");
-    int regions_i = lua_gettop(L) - 2, names_i = regions_i + 1, fixed_i = regions_i + 2;
-    int rc = 0;
-    if (!lua_istable(L, regions_i))
-        rc = fail(b, "%s: %s: regions must be a table {[tag] = material, ...}", where, ctor);
-    for (int i = 0; i < count && rc == 0; i++) {
-        int tag = present[i] + 1;
-        NsRegionInfo *reg = &sc->regions[i];
-        reg->tag = tag;
-        char rctx[64];
-        snprintf(rctx, sizeof rctx, "%s: regions[%d]", ctor, tag);
-        if (rawindex(L, regions_i, tag) == LUA_TNIL) {
-            rc = fail(b,
-                      "%s: %s: '%s' has tets with physical tag %d but regions has no entry "
-                      "for it (add [%d] = <material>)",
-                      where, ctor, sc->mesh_path, tag, tag);
-        } else {
-            rc = material_from_lua(b, -1, where, rctx, &reg->material);
-        }
-        lua_pop(L, 1);
-        if (rc)
-            break;
-        if (lua_istable(L, names_i) && rawindex(L, names_i, tag) == LUA_TSTRING)
-            reg->name = dup_string(lua_tostring(L, -1));
-        else
-            reg->name = dup_string(reg->material.name);
-        if (lua_istable(L, names_i))
-            lua_pop(L, 1);
-        if (!reg->name)
-            rc = fail(b, "%s: out of memory", where);
-        if (lua_istable(L, fixed_i)) {
-            rawindex(L, fixed_i, tag);
-            reg->fixed = lua_toboolean(L, -1);
-            lua_pop(L, 1);
-        }
-    }
-    lua_pop(L, 3);
-    if (rc == 0) {
-        for (int t = 0; t < m->tet_slots; t++) {
-            if (!ns_mesh_tet_alive(m, t))
-                continue;
-            const int *hit =
-                bsearch(&m->tet_region[t], present, (size_t)count, sizeof *present, cmp_int);
-            int r = (int)(hit - present);
-            m->tet_region[t] = r;
-            if (sc->regions[r].fixed)
-                for (int k = 0; k < 4; k++)
-                    m->flags[m->tet_node[4 * t + k]] |= NS_NODE_FIXED;
-        }
-    }
-    free(present);
-    return rc;
-}
-
-/* Per-region counts and volumes, fixed-node count. */
-static void region_stats(NsScenario *sc)
-{
-    const NsMesh *m = &sc->mesh;
-    for (int t = 0; t < m->tet_slots; t++) {
-        if (!ns_mesh_tet_alive(m, t))
-            continue;
-        const int *v = &m->tet_node[4 * t];
-        NsRegionInfo *reg = &sc->regions[m->tet_region[t]];
-        reg->tets++;
-        reg->volume_m3 +=
-            ns_tet_volume(&m->u[3 * v[0]], &m->u[3 * v[1]], &m->u[3 * v[2]], &m->u[3 * v[3]]);
-    }
-    sc->fixed_nodes = 0;
-    for (int v = 0; v < m->node_slots; v++)
-        if (ns_mesh_node_alive(m, v) && (m->flags[v] & NS_NODE_FIXED))
-            sc->fixed_nodes++;
-}
-
-static int build_tissue(Builder *b, int si)
-{
-    lua_State *L = b->L;
-    NsScenario *sc = b->sc;
-    rawfield(L, si, "tissue");
-    int ti = lua_gettop(L);
-    if (!is_kind(L, ti, "tissue")) {
-        lua_pop(L, 1);
-        return fail(b,
-                    "%s: ns.scenario: tissue must be ns.tissue.box{...}, ns.tissue.shapes{...} "
-                    "or ns.tissue.file{...}",
-                    sc->where);
-    }
-    char where[WHERE_MAX], type[16] = "";
-    get_where(L, ti, sc->where, where, sizeof where);
-    sc->tissue_where = dup_string(where);
-    if (rawfield(L, ti, "type") == LUA_TSTRING)
-        snprintf(type, sizeof type, "%s", lua_tostring(L, -1));
-    lua_pop(L, 1);
-    int rc;
-    if (strcmp(type, "box") == 0) {
-        sc->tissue_kind = NS_TISSUE_BOX;
-        rc = build_box(b, ti, where);
-    } else if (strcmp(type, "shapes") == 0) {
-        sc->tissue_kind = NS_TISSUE_SHAPES;
-        rc = build_shapes(b, ti, where);
-    } else if (strcmp(type, "file") == 0) {
-        sc->tissue_kind = NS_TISSUE_FILE;
-        rc = build_file(b, ti, where);
-    } else {
-        rc = fail(b, "%s: unknown tissue type '%s'", where, type);
-    }
-    lua_pop(L, 1);
-    if (rc == 0)
-        region_stats(sc);
-    /* Nothing held: the needle's push would carry the whole tissue away for as long as a
-     * script chased it (issue 32: a liver moved 4.9 m in 11 minutes). */
-    if (rc == 0 && sc->fixed_nodes == 0)
-        rc = fail(b,
-                  "%s: ns.tissue.%s: nothing holds the tissue in place (no fixed nodes), so the "
-                  "needle would push it away: hold it with fixed_faces = {\"zmax\", ...} on "
-                  "ns.tissue.box, fixed = true on a region of ns.tissue.shapes (bone), or fixed "
-                  "= {tag, ...} on ns.tissue.file",
-                  where, type);
-    return rc;
 }
 
 /* ---- load / free --------------------------------------------------------------------------- */
@@ -996,9 +543,9 @@ static int check_sets(Builder *b, const char *const *sets, int nsets)
                                  known[0] ? ", " : "", lua_tostring(L, -1));
                 }
             }
-            rc = fail(b, "%s: --set %.*s: the scenario has no parameter '%.*s' (%s%s)", b->sc->path,
-                      (int)(eq - sets[i]), sets[i], (int)(eq - sets[i]), sets[i],
-                      known[0] ? "its parameters: " : "it reads none with ns.param", known);
+            rc = scn_fail(b, "%s: --set %.*s: the scenario has no parameter '%.*s' (%s%s)",
+                          b->sc->path, (int)(eq - sets[i]), sets[i], (int)(eq - sets[i]), sets[i],
+                          known[0] ? "its parameters: " : "it reads none with ns.param", known);
         }
     }
     lua_pop(L, 1);
@@ -1031,26 +578,27 @@ static int load_body(lua_State *L)
     }
     int si = lua_gettop(L);
     int rc = 0;
-    if (!is_kind(L, si, "scenario")) {
-        rc =
-            fail(b, "%s: the scenario file must return ns.scenario{...} (it returned %s)", io->path,
-                 lua_isnil(L, si)     ? "nothing"
-                 : lua_istable(L, si) ? "a plain table: wrap it in ns.scenario{...}"
-                                      : luaL_typename(L, si));
+    if (!scn_is_kind(L, si, "scenario")) {
+        rc = scn_fail(b, "%s: the scenario file must return ns.scenario{...} (it returned %s)",
+                      io->path,
+                      lua_isnil(L, si)     ? "nothing"
+                      : lua_istable(L, si) ? "a plain table: wrap it in ns.scenario{...}"
+                                           : luaL_typename(L, si));
     }
     if (rc == 0) {
         char where[WHERE_MAX];
-        get_where(L, si, io->path, where, sizeof where);
-        sc->where = dup_string(where);
-        rc = sc->where ? get_string(b, si, "name", where, "ns.scenario", true, &sc->name)
-                       : fail(b, "needlesim: out of memory");
+        scn_get_where(L, si, io->path, where, sizeof where);
+        sc->where = scn_dup_string(where);
+        rc = sc->where ? scn_get_string(b, si, "name", where, "ns.scenario", true, &sc->name)
+                       : scn_fail(b, "needlesim: out of memory");
     }
     if (rc == 0)
-        rc = get_string(b, si, "description", sc->where, "ns.scenario", false, &sc->description);
+        rc =
+            scn_get_string(b, si, "description", sc->where, "ns.scenario", false, &sc->description);
     if (rc == 0)
         rc = check_sets(b, io->sets, io->nsets);
     if (rc == 0)
-        rc = build_tissue(b, si);
+        rc = scn_build_tissue(b, si);
     if (rc == 0) {
         lua_pushvalue(L, si);
         sc->table_ref = luaL_ref(L, LUA_REGISTRYINDEX);
@@ -1068,11 +616,11 @@ int ns_scenario_load_set(const char *path, const char *const *sets, int nsets, N
     sc->table_ref = LUA_NOREF;
     Builder b = {.sc = sc, .err = err, .err_sz = err_sz};
 
-    sc->path = dup_string(path);
+    sc->path = scn_dup_string(path);
     sc->lua = ns_lua_open(path, err, err_sz);
     if (!sc->path || !sc->lua) {
         if (sc->lua)
-            fail(&b, "needlesim: out of memory");
+            scn_fail(&b, "needlesim: out of memory");
         ns_scenario_free(sc);
         return -1;
     }
@@ -1110,7 +658,7 @@ void ns_scenario_free(NsScenario *sc)
     ns_mesh_free(&sc->mesh);
     for (int i = 0; i < sc->region_count; i++) {
         free(sc->regions[i].name);
-        material_free(&sc->regions[i].material);
+        scn_material_free(&sc->regions[i].material);
     }
     free(sc->regions);
     free(sc->path);

@@ -1,0 +1,200 @@
+/* One run of a scenario (engine/run.c and its parts): what `needlesim run`, `bench` and the live
+ * session share. The scenario is loaded and built, then ticked step by step (the script, an
+ * on_tick, a replayed log or a live client sets the controls), then scored and reported. */
+#ifndef NS_RUN_H
+#define NS_RUN_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "control_log.h"
+#include "coupling.h"
+#include "json.h"
+#include "rod.h"
+#include "run_render.h"
+#include "run_spec.h"
+#include "scenario.h"
+#include "series.h"
+#include "tissue.h"
+
+typedef struct NsRunOpts {
+    const char *scenario, *out_dir, *record, *replay;
+    /* written into a recorded log (control_log.h); --rescore: replay a log recorded against
+     * another scenario file */
+    const char *trainee, *session;
+    bool rescore;
+    const char *sets[32]; /* --set KEY=VALUE */
+    int nsets;
+    long steps; /* 0: the scenario decides */
+    int threads;
+    int solver; /* NsCoupledSolverKind */
+    bool quiet;
+    /* pictures (docs/rendering.md): summary.png unless --no-render; frames and video on ask */
+    bool no_render, frames;
+    const char *video;
+    int width, height, frame_every; /* frame_every 0: the scenario's camera decides */
+} NsRunOpts;
+
+/* ---- the model ---- */
+
+typedef struct NsRun {
+    NsRunOpts opt;
+    NsScenario sc;
+    NsRunSpec spec;
+    NsTissue tissue;
+    NsRod rod;
+    NsCoupled c;
+    bool have_sc, have_spec, have_tissue, have_rod, have_c;
+    int sim_ref, act_ref,
+        co_ref; /* registry refs: `sim`, the actions module, the script's coroutine */
+    /* statistics */
+    NsSeries step_ms, total_ms, lcp_ms, tissue_ms, needle_ms, remesh_ms, trials, iterations;
+    long steps;
+    long factorizations; /* of the tissue matrix, made or adopted (schur; the paper's needs none) */
+    int consistent, nan, inverted, unconverged, lcp_unresolved;
+    int repaired; /* tissue nodes moved by the remesher's repair (ns_remesh_repair) */
+    double max_axial, last_axial, path_cut, wall_s, last_tip[3];
+    NsMesh orig; /* the tissue's mesh as built: every needle's exit restores it */
+    bool have_orig;
+    int exited;                   /* the current needle has been withdrawn out of the tissue */
+    int needles;                  /* needles used so far */
+    int last_fr[3], last_cutting; /* friction-state counts and cutting at the last step */
+    int *target_hint, *marker_hint;
+    /* seeds released so far: material point, time, target index (-1: nearest at the end) */
+    struct Seed {
+        double u[3], t;
+        int target, hint;
+    } * seeds;
+    int seed_n, seed_cap;
+    /* physical outcomes (issue 32): the tip stopped at bone, the tip out through the surface */
+    struct Event {
+        double t, x[3];
+        int type, region; /* EVENT_*; bone: the region touched */
+    } * events;
+    int event_n, event_cap;
+    /* obstacles: per obstacle, whether the needle entered it, when first, for how many steps,
+     * where the tip was when it went in, and the deepest it got from there */
+    struct Obstacle {
+        bool violated, inside;
+        double first_t, entry[3], max_depth;
+        int steps_inside;
+    } * obst;
+    int tip_hint, insertions;
+    double prev_v;
+    /* output */
+    char *traj_tmp, *report_tmp, *rec_tmp;
+    FILE *rec;
+    NsControlLog replay;
+    bool made_dir, progress_shown, script_finished;
+    bool time_capped;    /* stopped at NS_LIMIT_DEFAULT_SIM_TIME with the script still running */
+    long max_steps;      /* the run's steps (0: until the script ends) */
+    long time_cap;       /* steps after which an unfinished script is stopped */
+    int more;            /* the control source (script or log) has more */
+    bool tty;            /* progress on stderr */
+    double t0;           /* the loop's start (ns_wall_s) */
+    bool stop_when_done; /* bench: the script's end ends the run even before --steps */
+    FILE *traj;
+    /* pictures */
+    bool rendering;
+    NsRunRender rr;
+    int every;          /* steps between frames */
+    int *prev_tet_node; /* the tets before the latest step (what remeshing changed) */
+    int prev_slots, prev_cap;
+    uint8_t *changed; /* per tet slot */
+    bool *obstacle_region;
+    double bounds[6];
+    bool entered;      /* the entry moment was taken */
+    bool *reached;     /* per target: the tip-reached moment was taken */
+    double peak_axial; /* the axial force's peak since the last puncture (moments) */
+    int punctures;
+    double end_s;     /* the run's end: last frame, contact sheet, video closed [s] */
+    NsSeries tips[3]; /* bench --compare: the tip after every step [m] */
+    bool log_tips;
+} NsRun;
+
+enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT };
+
+typedef struct NsTargetResult {
+    double x[3], error_mm, score;
+    bool hit, by_seed;
+} NsTargetResult;
+
+typedef struct NsSeedResult {
+    double x[3], error_mm;
+    int target;
+} NsSeedResult;
+
+typedef struct NsRunResults {
+    NsTargetResult *targets;
+    NsSeedResult *seeds;
+    double (*markers)[3];
+    double target_part, obstacle_penalty, total;
+    int violated;
+} NsRunResults;
+
+static inline double ns_run_dot3(const double *a, const double *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+extern const char *const ns_run_event_names[2];
+
+/* engine/run.c: the run: building, the loop, seeds, obstacles, events */
+int ns_run_record_events(NsRun *r, const NsCouplingStats *st, double t, const double tip[3]);
+const char *ns_run_event_region(const NsRun *r, const struct Event *e);
+const double *ns_run_tip(const NsRun *r);
+double ns_run_depth(const NsRun *r);
+int ns_run_world_of(const NsMesh *m, const double u[3], int *hint, double x[3]);
+int ns_run_place_needle(NsRun *r, const char *what, char *err, int err_sz);
+int ns_run_build(NsRun *r, char *err, int err_sz);
+int ns_run_next_needle(NsRun *r, const NsEntry *e, double t, char *err, int err_sz);
+int ns_run_release_seed(NsRun *r, double t, char *err, int err_sz);
+void ns_run_check_obstacles(NsRun *r, double t, int exited);
+/* A run after ns_run_build: begin (its length, the first frame), tick until it returns 0
+ * (each tick takes one step with the given controls, or the replayed log's, or the script's;
+ * 1: a step was taken, 0: the run is over, -1: an error, in err), finish (wall time, whether the
+ * script finished). ns_run_loop does all three. */
+int ns_run_begin(NsRun *r, char *err, int err_sz);
+int ns_run_tick(NsRun *r, const NsControl *given, char *err, int err_sz);
+void ns_run_finish(NsRun *r);
+int ns_run_loop(NsRun *r, char *err, int err_sz);
+void ns_run_free(NsRun *r);
+/* engine/run_script.c: the Lua bridge (the `sim` table, the script's coroutine, on_tick) */
+int ns_run_script_start(NsRun *r, char *err, int err_sz);
+int ns_run_script_tick(NsRun *r, double t, int exited, int *more, NsControl *ctl, char *err,
+                       int err_sz);
+/* engine/run_output.c: the output folder, the trajectory, the temporary files */
+char *ns_run_path_join(const char *dir, const char *name);
+int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz);
+void ns_run_traj_header(NsRun *r);
+void ns_run_outputs_remove(NsRun *r);
+/* engine/run_score.c: scoring the placement */
+double ns_run_dist_mm(const double *a, const double *b);
+int ns_run_score(NsRun *r, NsRunResults *res);
+void ns_run_results_free(NsRunResults *res);
+/* engine/run_report.c: report.json */
+void ns_run_stats_object(NsJson *j, const char *key, const NsSeries *s);
+void ns_run_json_vec(NsJson *j, const char *key, const double *v);
+void ns_run_timing_json(NsJson *j, const NsRun *r);
+int ns_run_write_report(NsRun *r, const NsRunResults *res, uint64_t hash, char *err, int err_sz);
+/* engine/run_moments.c: pictures of the key moments, frames and video */
+int ns_run_render_setup(NsRun *r, char *err, int err_sz);
+int ns_run_render_before_step(NsRun *r);
+int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResults *res_in,
+                      char *err, int err_sz);
+int ns_run_render_after_step(NsRun *r, const NsCouplingStats *st, bool dropped, char *err,
+                             int err_sz);
+int ns_run_render_end(NsRun *r, const NsRunResults *res, char *err, int err_sz);
+
+/* Loads the scenario (its --set values), reads its run fields and starts its script
+ * (engine/run_script.c); refuses a run that would not know when to stop. */
+int ns_run_load(NsRun *r, char *err, int err_sz);
+/* After the loop: the score, the last pictures, the state hash. res is filled (free it with
+ * ns_run_results_free). */
+int ns_run_end(NsRun *r, NsRunResults *res, uint64_t *hash, char *err, int err_sz);
+/* The trajectory closed, and every output renamed into place: the report and trajectory, the
+ * pictures, the control log last (a log on disk means the run and its report are there). */
+int ns_run_outputs_commit(NsRun *r, char *err, int err_sz);
+
+#endif

@@ -1,0 +1,371 @@
+/* The Lua bridge of a run (run.h): the `sim` table a script sees, its coroutine, on_tick and
+ * the controls they set. */
+#include <errno.h>
+#include <lauxlib.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "cleanup.h"
+#include "control_log.h"
+#include "coupling.h"
+#include "err.h"
+#include "json.h"
+#include "needle_path.h"
+#include "ns_config.h"
+#include "ns_limits.h"
+#include "out_files.h"
+#include "quality.h"
+#include "remesh.h"
+#include "rod.h"
+#include "run.h"
+
+/* ---- the script side: the `sim` table and the actions module ---- */
+
+/* Raw sets and gets only on the tables a script can reach: a metatable a script put on `sim`
+ * must not run outside a protected call. idx is absolute. */
+static void set_vec(lua_State *L, int idx, const char *key, const double v[3])
+{
+    lua_pushstring(L, key);
+    lua_createtable(L, 3, 0);
+    for (int i = 0; i < 3; i++) {
+        lua_pushnumber(L, v[i]);
+        lua_rawseti(L, -2, i + 1);
+    }
+    lua_rawset(L, idx);
+}
+
+static void set_num(lua_State *L, int idx, const char *key, double v)
+{
+    lua_pushstring(L, key);
+    lua_pushnumber(L, v);
+    lua_rawset(L, idx);
+}
+
+static int get_raw(lua_State *L, int idx, const char *key)
+{
+    lua_pushstring(L, key);
+    return lua_rawget(L, idx);
+}
+
+/* Everything that touches the scenario's Lua state runs inside ns_lua_call (a protected call
+ * with the instruction budget): a script can replace globals, put metatables on the tables it
+ * sees or run out of memory, and none of that may raise outside a protected call. */
+
+typedef struct TickIO {
+    NsRun *r;
+    double t;
+    int exited;
+    int more;      /* out: the script has more to do */
+    NsControl ctl; /* out: the controls for this step */
+} TickIO;
+
+/* (io) -> (): makes `sim`, loads needlesim.actions through the runtime's own require (kept in
+ * the registry by the runtime, not the script's global), and starts the script's coroutine. */
+static int start_body(lua_State *L)
+{
+    TickIO *io = lua_touserdata(L, 1);
+    NsRun *r = io->r;
+    lua_newtable(L); /* sim */
+    lua_pushstring(L, "control");
+    lua_newtable(L);
+    set_num(L, lua_gettop(L), "v_insert", 0.0);
+    set_num(L, lua_gettop(L), "twist_rate", 0.0);
+    lua_rawset(L, -3);
+    lua_pushstring(L, "limits"); /* the controls' bounds (sim/ns_limits.h) */
+    lua_createtable(L, 0, 4);
+    set_num(L, lua_gettop(L), "insert_speed", NS_LIMIT_INSERT_SPEED);
+    set_num(L, lua_gettop(L), "twist_rate", NS_LIMIT_TWIST_RATE);
+    set_num(L, lua_gettop(L), "base_speed", NS_LIMIT_BASE_SPEED);
+    set_num(L, lua_gettop(L), "twist_angle", NS_LIMIT_TWIST_ANGLE);
+    lua_rawset(L, -3);
+    lua_pushvalue(L, -1);
+    r->sim_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    int sim = lua_gettop(L);
+    lua_getfield(L, LUA_REGISTRYINDEX, "ns.require"); /* the sandbox's require */
+    if (!lua_isfunction(L, -1))
+        return luaL_error(L, "needlesim: the sandbox's require is missing");
+    lua_pushstring(L, "needlesim.actions");
+    lua_call(L, 1, 1);
+    if (!lua_istable(L, -1))
+        return luaL_error(L, "needlesim: needlesim.actions did not load as a table");
+    lua_pushvalue(L, -1);
+    r->act_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    lua_pushstring(L, "_bind");
+    lua_rawget(L, -2);
+    lua_pushvalue(L, sim);
+    lua_rawgeti(L, LUA_REGISTRYINDEX, r->sc.table_ref);
+    lua_pushstring(L, "script");
+    lua_rawget(L, -2);
+    lua_remove(L, -2);
+    lua_call(L, 2, 1); /* returns the script's coroutine, or nil */
+    r->co_ref = luaL_ref(L, LUA_REGISTRYINDEX);
+    return 0;
+}
+
+int ns_run_script_start(NsRun *r, char *err, int err_sz)
+{
+    lua_State *L = ns_lua_state(r->sc.lua);
+    TickIO io = {.r = r};
+    /* One budget for the whole of the run's script and on_tick calls (sim/ns_limits.h). */
+    ns_lua_begin_phase(r->sc.lua, "the run's script", NS_LIMIT_RUN_INSTRUCTIONS, 0.0);
+    lua_pushcfunction(L, start_body);
+    lua_pushlightuserdata(L, &io);
+    return ns_lua_call(r->sc.lua, 1, 0, err, err_sz);
+}
+
+/* The script's error, with the script's file and line in front when the error value has none
+ * (error({}) or error("x", 0)): the deepest frame of the coroutine in a Lua file. */
+static void raise_script_error(lua_State *L, lua_State *co, const char *scenario)
+{
+    const char *msg = lua_tostring(co, -1);
+    char buf[900];
+    snprintf(buf, sizeof buf, "%s",
+             msg                            ? msg
+             : lua_type(co, -1) == LUA_TNIL ? "error (nil)"
+                                            : "error (not a string)");
+    if (msg == NULL || strncmp(msg, scenario, strlen(scenario)) != 0) {
+        lua_Debug ar;
+        for (int level = 0; lua_getstack(co, level, &ar); level++)
+            if (lua_getinfo(co, "Sl", &ar) && ar.currentline > 0 && ar.source[0] == '@') {
+                if (strncmp(buf, ar.source + 1, strlen(ar.source + 1)) != 0) {
+                    lua_pushfstring(L, "%s:%d: %s", ar.source + 1, ar.currentline, buf);
+                    lua_error(L);
+                }
+                break;
+            }
+    }
+    lua_pushstring(L, buf);
+    lua_error(L);
+}
+
+/* Updates `sim` (at stack index si) for the tick: time, tip, forces, friction, events, the
+ * targets where the tissue has carried them. */
+static void fill_sim(lua_State *L, TickIO *io, int si)
+{
+    NsRun *r = io->r;
+    set_num(L, si, "t", io->t);
+    set_num(L, si, "dt", r->spec.dt);
+    lua_pushstring(L, "step");
+    lua_pushinteger(L, r->steps);
+    lua_rawset(L, si);
+    set_num(L, si, "depth", ns_run_depth(r));
+    set_vec(L, si, "tip", ns_run_tip(r));
+    set_num(L, si, "axial_force", r->last_axial);
+    double tt[3], m1[3], m2[3];
+    ns_rod_tip_frame(&r->rod, tt, m1, m2);
+    set_vec(L, si, "tip_direction", tt);
+    set_vec(L, si, "bevel_direction", m2);
+    lua_pushstring(L, "friction"); /* coupling nodes per friction state, last step */
+    lua_createtable(L, 0, 4);
+    set_num(L, lua_gettop(L), "sticking", r->last_fr[0]);
+    set_num(L, lua_gettop(L), "sliding_in", r->last_fr[1]);
+    set_num(L, lua_gettop(L), "sliding_out", r->last_fr[2]);
+    lua_pushstring(L, "cutting");
+    lua_pushboolean(L, r->last_cutting);
+    lua_rawset(L, -3);
+    lua_rawset(L, si);
+    lua_pushstring(L, "seeds_dropped");
+    lua_pushinteger(L, r->seed_n);
+    lua_rawset(L, si);
+    lua_pushstring(L, "exited");
+    lua_pushboolean(L, io->exited);
+    lua_rawset(L, si);
+    lua_pushstring(L, "bone_contact"); /* the tip rests on bone: the insertion stalls */
+    lua_pushboolean(L, r->c.tip_blocked);
+    lua_rawset(L, si);
+    lua_pushstring(L, "tip_exited"); /* the tip is out through the tissue's surface */
+    lua_pushboolean(L, r->c.params.remesh && r->c.path.through && !r->c.outside);
+    lua_rawset(L, si);
+    lua_pushstring(L, "events"); /* a fresh list every step: {t, type, tip, region} */
+    lua_createtable(L, r->event_n, 0);
+    for (int i = 0; i < r->event_n; i++) {
+        const struct Event *e = &r->events[i];
+        lua_createtable(L, 0, 4);
+        set_num(L, lua_gettop(L), "t", e->t);
+        lua_pushstring(L, ns_run_event_names[e->type]);
+        lua_setfield(L, -2, "type");
+        set_vec(L, lua_gettop(L), "tip", e->x);
+        if (e->type == EVENT_BONE_CONTACT) {
+            lua_pushstring(L, ns_run_event_region(r, e));
+            lua_setfield(L, -2, "region");
+        }
+        lua_rawseti(L, -2, i + 1);
+    }
+    lua_rawset(L, si);
+    lua_pushstring(L, "targets"); /* a fresh table every step */
+    lua_newtable(L);
+    for (int i = 0; i < r->spec.target_count; i++) {
+        /* A copy of the hint: the search the score makes at the end must not depend on
+         * whether a script looked at the targets (a replay does not), or the score could
+         * differ in its last bits between a run and its replay. */
+        double x[3];
+        int hint = r->target_hint[i];
+        if (ns_run_world_of(&r->tissue.mesh, r->spec.targets[i].at, &hint, x) != 0)
+            luaL_error(L, "needlesim: target '%s' could not be located in the tissue",
+                       r->spec.targets[i].name);
+        set_vec(L, lua_gettop(L), r->spec.targets[i].name, x);
+    }
+    lua_rawset(L, si);
+}
+
+/* One slice of the script's coroutine; io->more says whether it has more to do. */
+static void resume_script(lua_State *L, TickIO *io)
+{
+    NsRun *r = io->r;
+    /* The script: one slice of its coroutine. */
+    io->more = 0;
+    lua_rawgeti(L, LUA_REGISTRYINDEX, r->co_ref);
+    lua_State *co = lua_tothread(L, -1);
+    int resumable = co && (lua_status(co) == LUA_YIELD ||
+                           (lua_status(co) == LUA_OK && lua_gettop(co) > 0)); /* not yet ended */
+    if (resumable) {
+        int nres = 0;
+        int st = lua_resume(co, L, 0, &nres);
+        if (st == LUA_YIELD) {
+            lua_pop(co, nres);
+            io->more = 1;
+        } else if (st == LUA_OK) {
+            lua_pop(co, nres);
+        } else {
+            raise_script_error(L, co, r->sc.path);
+        }
+    }
+    lua_pop(L, 1);
+}
+
+/* Reads the controls from sim.control (at stack index ci), raw, each checked and bounded
+ * (sim/ns_limits.h), into io->ctl; the one-shot events are cleared. */
+static int read_controls(lua_State *L, TickIO *io, int ci)
+{
+    NsRun *r = io->r;
+    static const char *const keys[2] = {"v_insert", "twist_rate"};
+    double *dst[2] = {&io->ctl.v_insert, &io->ctl.twist_rate};
+    for (int k = 0; k < 2; k++) {
+        int ty = get_raw(L, ci, keys[k]);
+        double v = lua_tonumber(L, -1);
+        if (ty != LUA_TNUMBER || !isfinite(v))
+            return luaL_error(L, "%s: sim.control.%s must be a finite number (got %s)", r->sc.path,
+                              keys[k],
+                              ty == LUA_TNUMBER ? "a non-finite number" : luaL_typename(L, -1));
+        double lim = k == 0 ? NS_LIMIT_INSERT_SPEED : NS_LIMIT_TWIST_RATE;
+        if (fabs(v) > lim) {
+            char buf[160]; /* (lua_pushfstring knows no %g) */
+            snprintf(buf, sizeof buf, "sim.control.%s %g is beyond its limit of %g %s", keys[k], v,
+                     lim, k == 0 ? "m/s" : "rad/s");
+            return luaL_error(L, "%s: %s", r->sc.path, buf);
+        }
+        *dst[k] = v;
+        lua_pop(L, 1);
+    }
+    /* The sleeve's velocity: {vx, vy, vz} [m/s], absent = still. */
+    int bt = get_raw(L, ci, "base_velocity");
+    double vb[3] = {0.0, 0.0, 0.0};
+    if (bt == LUA_TTABLE) {
+        int bi = lua_gettop(L);
+        for (int k = 0; k < 3; k++) {
+            int ty = lua_rawgeti(L, bi, k + 1);
+            vb[k] = lua_tonumber(L, -1);
+            if (ty != LUA_TNUMBER || !isfinite(vb[k]) || fabs(vb[k]) > NS_LIMIT_BASE_SPEED)
+                bt = LUA_TNONE;
+            lua_pop(L, 1);
+        }
+    }
+    if (bt != LUA_TTABLE && bt != LUA_TNIL)
+        return luaL_error(L,
+                          "%s: sim.control.base_velocity must be {vx, vy, vz}: 3 finite "
+                          "numbers within +-%d mm/s, or nil",
+                          r->sc.path, (int)(1e3 * NS_LIMIT_BASE_SPEED));
+    memcpy(io->ctl.v_base, vb, sizeof vb);
+    lua_pop(L, 1);
+    /* act.next_needle{} leaves the new entry, checked by the action: {point, direction,
+     * bevel_toward or nil}, one-shot */
+    if (get_raw(L, ci, "next_needle") == LUA_TTABLE) {
+        int ni = lua_gettop(L);
+        NsEntry *e = &io->ctl.entry;
+        static const char *const keys3[3] = {"point", "direction", "bevel_toward"};
+        double *dst3[3] = {e->point, e->direction, e->bevel_toward};
+        for (int k = 0; k < 3; k++) {
+            int ty = get_raw(L, ni, keys3[k]);
+            if (k == 2)
+                e->has_bevel_toward = ty == LUA_TTABLE;
+            bool ok = true;
+            for (int i = 0; ty == LUA_TTABLE && i < 3; i++) {
+                ok &= lua_rawgeti(L, -1 - i, i + 1) == LUA_TNUMBER;
+                dst3[k][i] = lua_tonumber(L, -1);
+                ok &= isfinite(dst3[k][i]) != 0;
+            }
+            if (ty == LUA_TTABLE && !ok)
+                return luaL_error(L,
+                                  "%s: sim.control.next_needle.%s must be {x, y, z}: three "
+                                  "finite numbers",
+                                  r->sc.path, keys3[k]);
+            if (ty == LUA_TTABLE)
+                lua_pop(L, 3);
+            lua_pop(L, 1);
+            if (k < 2 && ty != LUA_TTABLE)
+                return luaL_error(L, "%s: sim.control.next_needle.%s must be {x, y, z}", r->sc.path,
+                                  keys3[k]);
+        }
+        io->ctl.next_needle = 1;
+    }
+    lua_pop(L, 1);
+    lua_pushstring(L, "next_needle");
+    lua_pushnil(L);
+    lua_rawset(L, ci);
+    /* act.drop_seed{} raises a one-shot flag */
+    io->ctl.drop_seed = get_raw(L, ci, "drop_seed") != LUA_TNIL && lua_toboolean(L, -1);
+    lua_pop(L, 1);
+    lua_pushstring(L, "drop_seed");
+    lua_pushnil(L);
+    lua_rawset(L, ci);
+    return 0;
+}
+
+/* (io) -> (): updates `sim`, resumes the script for one step, calls on_tick, reads the
+ * controls (raw accesses only: metatables a script sets do not run here). */
+static int tick_body(lua_State *L)
+{
+    TickIO *io = lua_touserdata(L, 1);
+    NsRun *r = io->r;
+    lua_rawgeti(L, LUA_REGISTRYINDEX, r->sim_ref);
+    int si = lua_gettop(L);
+    fill_sim(L, io, si);
+    resume_script(L, io);
+    lua_pushstring(L, "control");
+    if (lua_rawget(L, si) != LUA_TTABLE)
+        return luaL_error(L, "%s: sim.control must stay a table", r->sc.path);
+    int ci = lua_gettop(L);
+    if (!io->more && r->spec.has_script) { /* the script ended: the needle stops */
+        set_num(L, ci, "v_insert", 0.0);
+        set_num(L, ci, "twist_rate", 0.0);
+    }
+    if (r->spec.has_on_tick) {
+        lua_rawgeti(L, LUA_REGISTRYINDEX, r->sc.table_ref);
+        lua_pushstring(L, "on_tick");
+        lua_rawget(L, -2);
+        lua_remove(L, -2);
+        lua_pushvalue(L, si);
+        lua_call(L, 1, 0);
+    }
+    return read_controls(L, io, ci);
+}
+
+/* One step of the script side. *more: the script has more to do; *ctl: the controls. */
+int ns_run_script_tick(NsRun *r, double t, int exited, int *more, NsControl *ctl, char *err,
+                       int err_sz)
+{
+    lua_State *L = ns_lua_state(r->sc.lua);
+    TickIO io = {.r = r, .t = t, .exited = exited};
+    lua_pushcfunction(L, tick_body);
+    lua_pushlightuserdata(L, &io);
+    int rc = ns_lua_call(r->sc.lua, 1, 0, err, err_sz);
+    *more = io.more;
+    *ctl = io.ctl;
+    return rc;
+}
