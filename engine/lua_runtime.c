@@ -40,6 +40,7 @@ struct NsLua {
     int hook_mask;         /* LUA_MASKCOUNT, plus LUA_MASKLINE while the chunk runs */
     int modules_ref;       /* registry ref: the private require cache */
     size_t memory;         /* bytes held by the state */
+    int memory_hits;       /* allocations refused at the limit so far */
 };
 
 /* The cache holds this while a module is loading, to catch require cycles. */
@@ -81,20 +82,28 @@ static const char *source_name(const lua_Debug *ar)
     return ar->source && ar->source[0] == '@' ? ar->source + 1 : ar->short_src;
 }
 
+/* Lua's allocator with the state's memory limit. At the limit Lua runs a full collection and
+ * asks again: a script that keeps allocating there would make every allocation a collection of
+ * the whole heap (minutes). After NS_LUA_MEMORY_RETRIES refusals the retries are refused too,
+ * so the script fails with "not enough memory" after a bounded number of collections. */
+#define NS_LUA_MEMORY_RETRIES 8
 static void *limited_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 {
-    size_t *used = ud;
+    NsLua *rt = ud;
     size_t old = ptr ? osize : 0;
     if (nsize == 0) {
         free(ptr);
-        *used -= old;
+        rt->memory -= old;
         return NULL;
     }
-    if (nsize > old && *used - old + nsize > NS_LUA_MEMORY_LIMIT)
+    if (nsize > old && (rt->memory - old + nsize > NS_LUA_MEMORY_LIMIT ||
+                        rt->memory_hits > NS_LUA_MEMORY_RETRIES)) {
+        rt->memory_hits++;
         return NULL;
+    }
     void *p = realloc(ptr, nsize);
     if (p)
-        *used = *used - old + nsize;
+        rt->memory = rt->memory - old + nsize;
     return p;
 }
 
@@ -600,7 +609,7 @@ NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
             rt->scenario_dir[n] = '\0';
         }
     }
-    rt->L = lua_newstate(limited_alloc, &rt->memory);
+    rt->L = lua_newstate(limited_alloc, rt);
     if (!rt->scripts_dir || !rt->scenario_dir || !rt->L) {
         ns_lua_close(rt);
         snprintf(err, (size_t)err_sz, "needlesim: out of memory");

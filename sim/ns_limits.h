@@ -47,7 +47,7 @@
 /* Lua VM instructions for the whole of a run's script and on_tick calls, all together. */
 #define NS_LIMIT_RUN_INSTRUCTIONS 5000000000LL
 /* Memory one scenario's Lua state may hold [bytes]. */
-#define NS_LIMIT_LUA_MEMORY ((size_t)1 << 30)
+#define NS_LIMIT_LUA_MEMORY ((size_t)256 << 20)
 /* Wall-clock time loading a scenario may take, meshing included [s]. */
 #define NS_LIMIT_LOAD_SECONDS 60.0
 /* The string library's pattern functions (find, match, gmatch, gsub): longest subject and

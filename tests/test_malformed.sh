@@ -73,6 +73,7 @@ expect "__gc finalizer" 1 "__gc" -- $R gc_loop.lua
 expect "backtracking string.find" 1 "matching steps" -- $R pattern_backtrack.lua
 expect "endless loop catching its error" 1 "instruction limit exceeded" -- $R pcall_loop.lua
 expect "memory hog" 1 "not enough memory" -- $R memory_hog.lua
+expect "memory filled by small strings" 1 "not enough memory" -- check memory_fill.lua
 expect "shape function called per vertex" 1 "instruction limit exceeded" -- check shape_calls.lua
 expect "error(nil)" 1 "error_nil.lua:1:" -- $R error_nil.lua
 # Files that never end or block.
