@@ -3,8 +3,8 @@
  * bounds). Scenarios, meshes, trainee logs and live messages come from other people; each of
  * these is checked where the value is used, whatever a constructor checked earlier.
  * docs/reliability.md lists them for users. */
-#ifndef NS_LIMITS_H
-#define NS_LIMITS_H
+#ifndef NS_NS_LIMITS_H
+#define NS_NS_LIMITS_H
 
 /* ---- controls (scripts, trainee logs and live messages alike) -------------------------------
  * Physical bounds, well above any clinical or robotic procedure, so that the work a step does
