@@ -52,4 +52,16 @@ static const char *fuzz_write_file(const char *name, const uint8_t *data, size_t
     return path;
 }
 
+/* NS_FUZZ_VERBOSE=1 prints each input's message to stderr: to see what a reproducer gets. */
+static void fuzz_report(const char *err)
+{
+    static int verbose = -1;
+    if (verbose < 0) {
+        const char *v = getenv("NS_FUZZ_VERBOSE");
+        verbose = v && v[0] && strcmp(v, "0") != 0;
+    }
+    if (verbose)
+        fprintf(stderr, "fuzz: %s\n", err[0] ? err : "(no error)");
+}
+
 #endif

@@ -17,6 +17,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         ns_mesh_free(&m);
     else if (memchr(err, '\0', sizeof err) == NULL)
         abort(); /* the message must be a terminated string */
+    fuzz_report(err);
     unlink(path);
     return 0;
 }

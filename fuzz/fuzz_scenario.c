@@ -29,6 +29,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     }
     if (memchr(err, '\0', sizeof err) == NULL)
         abort();
+    fuzz_report(err);
     unlink(path);
     return 0;
 }
