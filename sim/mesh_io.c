@@ -15,9 +15,11 @@
 
 #include "mesh_io.h"
 #include "err.h"
+#include "ns_limits.h"
 #include "quality.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <math.h>
 #include <stdarg.h>
@@ -26,6 +28,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 /* |quality| at or below this is a flat tet. Quality is 6*sqrt(2)*volume / rms_edge^3, so this is
@@ -1026,22 +1029,66 @@ done:
     return rc;
 }
 
+/* The whole file, NUL-terminated. Only a regular file, and at most NS_LIMIT_MESH_FILE_BYTES:
+ * a device or a FIFO (ns.tissue.file{path = "/dev/zero"}) would otherwise be read until memory
+ * ran out, or block. Opened non-blocking so that a FIFO is refused, not waited on; a file that
+ * grows while it is read still stops at the limit. */
 static int read_whole_file(const char *path, char **out, size_t *out_len, char *err, int err_sz)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
+    const size_t limit = (size_t)NS_LIMIT_MESH_FILE_BYTES;
+    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) {
         ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
         return -1;
     }
-    char *buf = NULL;
-    size_t len = 0, cap = 0;
+    struct stat st;
+    if (fstat(fd, &st) != 0) {
+        ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
+        close(fd);
+        return -1;
+    }
+    if (!S_ISREG(st.st_mode)) {
+        ns_set_err(err, err_sz, "%s: cannot open: not a regular file%s", path,
+                   S_ISDIR(st.st_mode) ? " (a directory)" : "");
+        close(fd);
+        return -1;
+    }
+    if (st.st_size < 0 || (unsigned long long)st.st_size > limit) {
+        ns_set_err(err, err_sz, "%s: the file is %lld bytes; a mesh file may have at most %lld",
+                   path, (long long)st.st_size, (long long)NS_LIMIT_MESH_FILE_BYTES);
+        close(fd);
+        return -1;
+    }
+    FILE *f = fdopen(fd, "rb");
+    if (!f) {
+        ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
+        close(fd);
+        return -1;
+    }
+    /* The size as the first guess; then grow by half, never past one byte over the limit. */
+    size_t cap = (size_t)st.st_size + 2, len = 0;
+    char *buf = malloc(cap);
     for (;;) {
-        if (grow((void **)&buf, &cap, len + 65536 + 1, 1)) {
+        if (buf && len + 1 >= cap && cap < limit + 2) {
+            size_t c = cap + cap / 2 + 65536;
+            if (c > limit + 2)
+                c = limit + 2;
+            char *p = realloc(buf, c);
+            if (!p) {
+                free(buf);
+                buf = NULL;
+            } else {
+                buf = p;
+                cap = c;
+            }
+        }
+        if (!buf) {
             ns_set_err(err, err_sz, "%s: out of memory reading the file", path);
-            free(buf);
             fclose(f);
             return -1;
         }
+        if (len + 1 >= cap)
+            break; /* limit + 1 bytes read: too long */
         size_t got = fread(buf + len, 1, cap - len - 1, f);
         len += got;
         if (got == 0)
@@ -1054,6 +1101,13 @@ static int read_whole_file(const char *path, char **out, size_t *out_len, char *
         return -1;
     }
     fclose(f);
+    if (len > limit) {
+        ns_set_err(err, err_sz,
+                   "%s: the file is longer than %lld bytes, the most a mesh file may have", path,
+                   (long long)NS_LIMIT_MESH_FILE_BYTES);
+        free(buf);
+        return -1;
+    }
     buf[len] = '\0';
     *out = buf;
     *out_len = len;
