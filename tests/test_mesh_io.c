@@ -740,6 +740,17 @@ static int read_missing_file(void)
     ENSURE(ns_mesh_read_msh(g_dir, &m, err, sizeof err) == -1);
     ENSURE(strstr(err, g_dir) == err);
     ns_mesh_free(&m);
+    /* a device or a FIFO is refused at once, not read until memory runs out or waited on
+     * (found by fuzz/fuzz_scenario: ns.tissue.file{path = "/dev/zero"}) */
+    ENSURE(ns_mesh_read_msh("/dev/zero", &m, err, sizeof err) == -1);
+    ENSURE(strstr(err, "/dev/zero:") == err && strstr(err, "regular files only") != NULL);
+    char fifo[512];
+    tmp_path(fifo, "fifo.msh");
+    ENSURE(mkfifo(fifo, 0600) == 0);
+    ENSURE(ns_mesh_read_msh(fifo, &m, err, sizeof err) == -1);
+    ENSURE(strstr(err, "regular files only") != NULL);
+    unlink(fifo);
+    ns_mesh_free(&m);
     /* a tiny buffer truncates the message but stays terminated; a NULL buffer is allowed */
     char tiny[8];
     ENSURE(ns_mesh_read_msh(path, &m, tiny, sizeof tiny) == -1);

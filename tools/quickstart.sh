@@ -4,9 +4,10 @@
 #
 #   bash tools/quickstart.sh          # set up, build, run the brachytherapy scenario
 #   bash tools/quickstart.sh test     # set up, build with -Werror, run all tests, then again
-#                                     # under AddressSanitizer + UndefinedBehaviorSanitizer
+#                                     # under AddressSanitizer + UndefinedBehaviorSanitizer,
+#                                     # then each fuzz harness for 60 s (tools/fuzz.sh)
 #
-# The last line of `test` is "N passed, N failed" (counted over both builds).
+# The last line of `test` is "N passed, N failed" (counted over the three builds).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode="${1:-run}"
@@ -87,6 +88,11 @@ test)
     build build-asan -Dbuildtype=debugoptimized -Dwerror=true -Db_sanitize=address,undefined \
         -Db_lundef=false
     UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ASAN_OPTIONS=detect_leaks=1 runtests build-asan
+    # The fuzz build (clang, libFuzzer; it installs clang if missing): its only tests are the
+    # three harnesses' 60-second regression runs on their seed corpora, two at a time
+    # (docs/reliability.md, "Fuzzing"). The unit and command-line tests are not built there.
+    bash tools/fuzz.sh build
+    runtests build-fuzz
     trap - EXIT
     echo "$passed passed, $failed failed"
     [ "$failed" -eq 0 ]

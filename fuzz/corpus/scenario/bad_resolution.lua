@@ -1,0 +1,9 @@
+local ns = require "needlesim"
+return ns.scenario {
+    name = "negative resolution",
+    tissue = ns.tissue.box {
+        size = { 0.02, 0.02, 0.02 },
+        resolution = -0.004,
+        material = ns.materials.gel,
+    },
+}

@@ -1,0 +1,3 @@
+local ns = require "needlesim"
+local io = require "io"
+return io.open("/etc/passwd")

@@ -1,0 +1,2 @@
+local ns = require "needlesim"
+os.execute("echo escaped")

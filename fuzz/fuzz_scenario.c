@@ -1,0 +1,35 @@
+/* libFuzzer harness for the scenario loader: the Lua file run in its sandbox and the tissue
+ * built from what it returns (engine/scenario.c, engine/lua_runtime.c), then the run fields
+ * read from it (engine/run_spec.c), as `needlesim run` does before its first step. A scenario
+ * that fails is an error message; a crash, a sanitizer report, a leak, a load past the time
+ * limit or a runaway allocation is a finding.
+ *
+ * `require "needlesim"` finds this tree's scripts/ (NEEDLESIM_SCRIPTS, else the folder the
+ * build was configured with); a plain `require` finds only the input itself, in its private
+ * folder.
+ *
+ *     build-fuzz/fuzz/fuzz_scenario fuzz/corpus/scenario -dict=fuzz/scenario.dict   (tools/fuzz.sh)
+ */
+#include "fuzz_file.h"
+#include "run_spec.h"
+#include "scenario.h"
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    const char *path = fuzz_write_file("input.lua", data, size);
+    NsScenario sc;
+    char err[1024] = "";
+    if (ns_scenario_load_set(path, NULL, 0, &sc, err, (int)sizeof err) == 0) {
+        NsRunSpec spec;
+        if (ns_run_spec_read(&sc, &spec, err, (int)sizeof err) == 0)
+            ns_run_spec_free(&spec);
+        ns_scenario_free(&sc);
+    }
+    if (memchr(err, '\0', sizeof err) == NULL)
+        abort();
+    fuzz_report(err);
+    unlink(path);
+    return 0;
+}
