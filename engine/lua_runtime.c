@@ -30,17 +30,18 @@ struct NsLua {
     lua_State *L;
     char *scripts_dir;
     char *scenario_dir;
-    char *scenario_source; /* "@path" of the scenario chunk, for the line hook */
-    long long budget;      /* instructions of the current phase (loading, the run) */
-    long long remaining;   /* left in the current phase, over all its entries together */
-    const char *phase;     /* "loading the scenario", "the run": for messages */
-    double deadline;       /* CLOCK_MONOTONIC seconds the phase must end by (0: none) */
-    double seconds;        /* the phase's wall-clock limit [s], for messages */
-    int last_line;         /* last line run in the scenario chunk (see ns_where) */
-    int hook_mask;         /* LUA_MASKCOUNT, plus LUA_MASKLINE while the chunk runs */
-    int modules_ref;       /* registry ref: the private require cache */
-    size_t memory;         /* bytes held by the state */
-    int memory_hits;       /* allocations refused at the limit so far */
+    char *scenario_source;   /* "@path" of the scenario chunk, for the line hook */
+    long long budget;        /* instructions of the current phase (loading, the run) */
+    long long remaining;     /* left in the current phase, over all its entries together */
+    const char *phase;       /* "loading the scenario", "the run": for messages */
+    double deadline;         /* CLOCK_MONOTONIC seconds the phase must end by (0: none) */
+    double seconds;          /* the phase's wall-clock limit [s], for messages */
+    int last_line;           /* last line run in the scenario chunk (see ns_where) */
+    const char *source_seen; /* the chunk's source string as Lua holds it, once seen */
+    int hook_mask;           /* LUA_MASKCOUNT, plus LUA_MASKLINE while the chunk runs */
+    int modules_ref;         /* registry ref: the private require cache */
+    size_t memory;           /* bytes held by the state */
+    int memory_hits;         /* allocations refused at the limit so far */
 };
 
 /* The cache holds this while a module is loading, to catch require cycles. */
@@ -147,9 +148,13 @@ static void hook(lua_State *L, lua_Debug *ar)
     NsLua *rt = runtime_of(L);
     char buf[200];
     if (ar->event == LUA_HOOKLINE) {
+        /* The chunk's functions share one source string: once it has matched, a pointer
+         * comparison does (a strcmp on every line was most of a tight loop's cost). */
         if (rt->scenario_source && lua_getinfo(L, "S", ar) &&
-            strcmp(ar->source, rt->scenario_source) == 0)
+            (ar->source == rt->source_seen || strcmp(ar->source, rt->scenario_source) == 0)) {
+            rt->source_seen = ar->source;
             rt->last_line = ar->currentline;
+        }
         rt->remaining -= NS_LINE_EVENT_COST;
     } else if (ar->event == LUA_HOOKCOUNT) {
         rt->remaining -= NS_HOOK_STEP;
@@ -172,18 +177,42 @@ static void set_hook(lua_State *L, int mask, int count)
     lua_sethook(L, hook, mask, count);
 }
 
+/* msg starts with "SOURCE:LINE:" (a position Lua or a script put there). */
+static bool has_location(const char *msg)
+{
+    const char *c = strchr(msg, ':');
+    while (c && c - msg < 1024) {
+        const char *d = c + 1;
+        while (*d >= '0' && *d <= '9')
+            d++;
+        if (d > c + 1 && *d == ':')
+            return true;
+        c = strchr(c + 1, ':');
+    }
+    return false;
+}
+
 /* The error's text: strings as they are, anything else (error(nil), error({})) described and
  * given the file and line of the Lua function that raised it, so every message has one. */
 static int message_handler(lua_State *L)
 {
+    lua_Debug ar;
     if (lua_type(L, 1) == LUA_TSTRING || lua_type(L, 1) == LUA_TNUMBER) {
-        lua_tostring(L, 1);
+        const char *msg = lua_tostring(L, 1);
         lua_settop(L, 1);
+        /* A message raised from C with no position ("attempt to yield from outside a
+         * coroutine", a C function's luaL_error) gets the innermost Lua line. */
+        if (has_location(msg) || strncmp(msg, "needlesim", 9) == 0)
+            return 1;
+        for (int level = 1; lua_getstack(L, level, &ar); level++)
+            if (lua_getinfo(L, "Sl", &ar) && ar.currentline > 0) {
+                lua_pushfstring(L, "%s:%d: %s", source_name(&ar), ar.currentline, msg);
+                return 1;
+            }
         return 1;
     }
     if (luaL_callmeta(L, 1, "__tostring") && lua_type(L, -1) == LUA_TSTRING)
         return 1;
-    lua_Debug ar;
     for (int level = 1; lua_getstack(L, level, &ar); level++)
         if (lua_getinfo(L, "Sl", &ar) && ar.currentline > 0) {
             lua_pushfstring(L, "%s:%d: error (the error value is %s, not a message)",
@@ -692,6 +721,7 @@ int ns_lua_run_scenario(NsLua *rt, const char *path, char *err, int err_sz)
     rt->scenario_source[0] = '@';
     memcpy(rt->scenario_source + 1, path, n + 1);
     rt->last_line = 0;
+    rt->source_seen = NULL;
     /* Line events only while the chunk itself runs: they cost, and only constructors called
      * by the chunk need them (ns_where). */
     rt->hook_mask = LUA_MASKCOUNT | LUA_MASKLINE;

@@ -592,6 +592,9 @@ static int load_body(lua_State *L)
         rc = sc->where ? scn_get_string(b, si, "name", where, "ns.scenario", true, &sc->name)
                        : scn_fail(b, "needlesim: out of memory");
     }
+    if (rc == 0 && strlen(sc->name) > NS_LIMIT_SCENARIO_NAME)
+        rc = scn_fail(b, "%s: ns.scenario: name is %zu bytes long (at most %d)", sc->where,
+                      strlen(sc->name), NS_LIMIT_SCENARIO_NAME);
     if (rc == 0)
         rc =
             scn_get_string(b, si, "description", sc->where, "ns.scenario", false, &sc->description);

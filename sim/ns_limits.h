@@ -77,5 +77,7 @@
 
 /* Names that end up in CSV headers and JSON (targets, markers, obstacles, regions) [bytes]. */
 #define NS_LIMIT_NAME_LENGTH 64
+/* A scenario's name (free text: reports, logs' provenance) [bytes]. */
+#define NS_LIMIT_SCENARIO_NAME 200
 
 #endif

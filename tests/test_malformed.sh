@@ -76,6 +76,8 @@ expect "memory hog" 1 "not enough memory" -- $R memory_hog.lua
 expect "memory filled by small strings" 1 "not enough memory" -- check memory_fill.lua
 expect "shape function called per vertex" 1 "instruction limit exceeded" -- check shape_calls.lua
 expect "error(nil)" 1 "error_nil.lua:1:" -- $R error_nil.lua
+expect "coroutine.yield in a shape function" 1 "yield_in_shape.lua:5: attempt to yield" -- check yield_in_shape.lua
+expect "a scenario name of 1,000 bytes" 1 "name is 1000 bytes long" -- check long_name.lua
 # Files that never end or block.
 expect "mesh path /dev/zero" 1 "not a regular file" -- check dev_zero.lua
 expect "mesh path a FIFO" 1 "not a regular file" -- check fifo_mesh.lua
