@@ -15,6 +15,7 @@
 #include <lualib.h>
 
 #include "cleanup.h"
+#include "data_dir.h"
 #include "ns_limits.h"
 #include "ns_config.h"
 
@@ -623,8 +624,7 @@ NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
         snprintf(err, (size_t)err_sz, "needlesim: out of memory");
         return NULL;
     }
-    const char *env = getenv("NEEDLESIM_SCRIPTS");
-    rt->scripts_dir = dup_string(env && env[0] ? env : NS_SCRIPTS_DIR);
+    rt->scripts_dir = dup_string(ns_data_dir("scripts"));
     const char *slash = strrchr(scenario_path, '/');
     if (!slash) {
         rt->scenario_dir = dup_string(".");

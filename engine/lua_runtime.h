@@ -4,7 +4,7 @@
  * Only the base, table, string, math, utf8 and coroutine libraries are open: no io, os,
  * package or debug. dofile, loadfile and string.dump are gone; `load` takes text only; print
  * writes to stderr (stdout belongs to --json). `require` loads `needlesim` and
- * `needlesim.<x>` from the scripts folder (NEEDLESIM_SCRIPTS, else NS_SCRIPTS_DIR) and plain
+ * `needlesim.<x>` from the scripts folder (ns_data_dir("scripts"), data_dir.h) and plain
  * names from the scenario's own folder, nothing else (the engine finds the same function in
  * the registry as "ns.require", whatever a script does to its globals). math.random is seeded with
  * a constant, so a scenario is deterministic unless it reseeds.

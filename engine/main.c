@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "commands.h"
+#include "data_dir.h"
 #include "ns_config.h"
 
 #if NS_HAVE_OPENBLAS
@@ -43,6 +44,10 @@ static void print_version(void)
 #else
     printf("BLAS: system default (OpenBLAS not linked)\n");
 #endif
+    /* Where the shipped data is looked for (engine/data_dir.h gives the order). */
+    static const char *const what[] = {"scripts", "scenarios", "assets"};
+    for (size_t i = 0; i < sizeof what / sizeof what[0]; i++)
+        printf("%s: %s (%s)\n", what[i], ns_data_dir(what[i]), ns_data_dir_via(what[i]));
 }
 
 int main(int argc, char **argv)

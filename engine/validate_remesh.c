@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "coupling.h"
+#include "data_dir.h"
 #include "err.h"
 #include "mesh_grid.h"
 #include "ns_config.h"
@@ -469,11 +470,20 @@ static int brachy_needle(NsTissue *tissue, const NsMesh *orig, const int *nodes,
     return 0;
 }
 
+/* The shipped brachytherapy scenario, wherever the shipped scenarios are (data_dir.h): an
+ * installed needlesim validates without its source tree. */
+static int load_brachytherapy(NsScenario *sc, char *err, int err_sz)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/brachytherapy.lua", ns_data_dir("scenarios"));
+    return ns_scenario_load(path, sc, err, err_sz);
+}
+
 static int remesh_restore(NsValidateResult *r)
 {
     NsScenario sc;
     char err[1024];
-    if (ns_scenario_load(NS_SOURCE_DIR "/scenarios/brachytherapy.lua", &sc, err, sizeof err))
+    if (load_brachytherapy(&sc, err, sizeof err))
         return fail(r, err);
     NsMesh orig;
     if (ns_mesh_copy(&orig, &sc.mesh)) {
@@ -1082,7 +1092,7 @@ static int remesh_cycles(NsValidateResult *r)
 {
     NsScenario sc;
     char err[1024] = "";
-    if (ns_scenario_load(NS_SOURCE_DIR "/scenarios/brachytherapy.lua", &sc, err, sizeof err))
+    if (load_brachytherapy(&sc, err, sizeof err))
         return fail(r, err);
     NsMesh orig;
     if (ns_mesh_copy(&orig, &sc.mesh)) {
