@@ -1,0 +1,3 @@
+-- a module name with ".."
+require "a..b"
+return require("base").scenario()

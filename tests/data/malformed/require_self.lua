@@ -1,0 +1,3 @@
+-- a module that requires itself
+require "require_self"
+return require("base").scenario()
