@@ -14,17 +14,26 @@ static volatile sig_atomic_t stop_signal;
 
 static void remove_registered(void)
 {
-    for (int i = 0; i < CLEANUP_MAX; i++) {
+    for (int i = CLEANUP_MAX - 1; i >= 0; i--) { /* newest first: files before their folders */
         char *p = paths[i];
         if (p && unlink(p) != 0)
             rmdir(p);
     }
 }
 
+static void (*volatile on_stop)(void);
+
+void ns_cleanup_on_signal(void (*fn)(void))
+{
+    on_stop = fn;
+}
+
 static void on_signal(int sig)
 {
     if (stop_signal == 0) {
         stop_signal = sig;
+        if (on_stop)
+            on_stop();
         return;
     }
     remove_registered();
@@ -71,6 +80,11 @@ void ns_cleanup_forget(const char *path)
             free(p);
             return;
         }
+}
+
+const volatile sig_atomic_t *ns_cleanup_stop_flag(void)
+{
+    return &stop_signal;
 }
 
 int ns_cleanup_signal(void)

@@ -10,6 +10,8 @@
 #ifndef NS_CLEANUP_H
 #define NS_CLEANUP_H
 
+#include <signal.h>
+
 /* Installs the signal handlers (once per process). */
 void ns_cleanup_install(void);
 /* Registers a file or folder this process created (a folder is removed with rmdir, so only
@@ -18,6 +20,11 @@ void ns_cleanup_install(void);
 int ns_cleanup_add(const char *path);
 /* Forgets a path (renamed into place, or removed by the caller). */
 void ns_cleanup_forget(const char *path);
+/* A function the stop signals' handler calls after raising the flag (async-signal-safe: the
+ * Lua runtime sets its hook, so a running script sees the signal at its next instruction). */
+void ns_cleanup_on_signal(void (*fn)(void));
+/* The flag itself, for long C work that checks it (the mesher). */
+const volatile sig_atomic_t *ns_cleanup_stop_flag(void);
 /* The signal that asked the program to stop (SIGINT, SIGTERM, SIGHUP), or 0. */
 int ns_cleanup_signal(void);
 /* Prints `line` to stderr, removes everything registered and exits with status 2. */

@@ -19,6 +19,7 @@
 #include "coupling.h"
 #include "err.h"
 #include "json.h"
+#include "names.h"
 #include "needle_path.h"
 #include "ns_config.h"
 #include "ns_limits.h"
@@ -410,6 +411,7 @@ int ns_cmd_bench(int argc, char **argv)
     if (rc) {
         size_t n = strlen(o.scenario);
         bool located = strncmp(err, "needlesim", 9) == 0 || strncmp(err, o.scenario, n) == 0;
+        ns_one_line(err);
         fprintf(stderr, "%s%s\n", located ? "" : "needlesim: ", err);
         for (int k = 0; k < made; k++)
             ns_run_free(&runs[k]);

@@ -12,6 +12,7 @@
 
 #include "commands.h"
 #include "json.h"
+#include "names.h"
 #include "mesh.h"
 #include "mesh_io.h"
 #include "ns_config.h"
@@ -220,6 +221,7 @@ int ns_cmd_check(int argc, char **argv)
     NsScenario sc;
     char err[2048];
     if (ns_scenario_load(scenario, &sc, err, (int)sizeof err) != 0) {
+        ns_one_line(err);
         fprintf(stderr, "%s\n", err);
         return 1;
     }

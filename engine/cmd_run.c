@@ -16,6 +16,7 @@
  * --compare paper, both solvers'). Pictures: engine/run_render.c. */
 #include "commands.h"
 #include <errno.h>
+#include <limits.h>
 #include <lauxlib.h>
 #include <math.h>
 #include <stdint.h>
@@ -31,6 +32,7 @@
 #include "coupling.h"
 #include "err.h"
 #include "json.h"
+#include "names.h"
 #include "needle_path.h"
 #include "ns_config.h"
 #include "ns_limits.h"
@@ -54,9 +56,11 @@ static const char run_usage[] =
 /* A bad command line: one line, the usage on --help (the one-line contract for bad input). */
 static int usage_error(const char *fmt, const char *arg)
 {
-    fputs("needlesim run: ", stderr);
-    fprintf(stderr, fmt, arg);
-    fputs(" (needlesim run --help)\n", stderr);
+    char shown[200], line[600];
+    snprintf(shown, sizeof shown, "%s", arg);
+    snprintf(line, sizeof line, fmt, shown);
+    ns_one_line(line);
+    fprintf(stderr, "needlesim run: %s (needlesim run --help)\n", line);
     return 2;
 }
 
@@ -88,6 +92,9 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
                 const char *eq = strchr(v, '=');
                 if (!eq || eq == v)
                     return usage_error("--set '%s': expected KEY=VALUE", v);
+                for (const char *c = v; *c; c++)
+                    if ((unsigned char)*c < 0x20 || *c == 0x7f)
+                        return usage_error("--set '%s': control characters are not allowed", v);
                 if (o->nsets == 32)
                     return usage_error("%s", "at most 32 --set values");
                 for (int k = 0; k < o->nsets; k++)
@@ -190,7 +197,8 @@ static int open_logs(NsRun *r, char *err, int err_sz)
         rc = ns_control_log_read(r->opt.replay, r->spec.dt, &r->replay, err, err_sz);
     if (rc == 0 && r->opt.replay)
         rc = ns_control_log_check_scenario(&r->replay, r->opt.replay, r->sc.name, sc_hash,
-                                           r->opt.rescore, err, err_sz);
+                                           r->opt.rescore, r->note, (int)sizeof r->note, err,
+                                           err_sz);
     if (rc == 0 && r->opt.replay) { /* the same --set values as the recording */
         bool same = r->replay.nsets == r->opt.nsets;
         for (int i = 0; same && i < r->opt.nsets; i++) {
@@ -280,6 +288,54 @@ static void print_summary(NsRun *r, const NsRunResults *res, uint64_t hash)
     }
 }
 
+/* The canonical path of p's folder joined with its last component (p need not exist; its
+ * folder must). Returns 0, or -1 when the folder cannot be resolved. */
+static int canonical(const char *p, char *out, size_t n)
+{
+    char dir[PATH_MAX], real[PATH_MAX];
+    const char *slash = strrchr(p, '/');
+    const char *base = slash ? slash + 1 : p;
+    if (slash)
+        snprintf(dir, sizeof dir, "%.*s", (int)(slash - p == 0 ? 1 : slash - p), p);
+    else
+        snprintf(dir, sizeof dir, ".");
+    if (!realpath(dir, real))
+        return -1;
+    snprintf(out, n, "%s/%s", real, base);
+    return 0;
+}
+
+/* --record must not replace the run's inputs (the scenario, the replayed log) or its other
+ * outputs (report.json, trajectory.csv, summary.png, the video): compared as files (device
+ * and inode) where they exist, and as canonical paths. Returns 0 or a usage error (2). */
+static int check_record_path(const NsRunOpts *o)
+{
+    if (!o->record)
+        return 0;
+    struct stat rs, st;
+    bool exists = stat(o->record, &rs) == 0;
+    const char *inputs[2] = {o->scenario, o->replay};
+    for (int k = 0; k < 2; k++)
+        if (inputs[k] && exists && stat(inputs[k], &st) == 0 && st.st_dev == rs.st_dev &&
+            st.st_ino == rs.st_ino)
+            return usage_error("--record '%s': that is the run's own input", o->record);
+    char rec[PATH_MAX + 256], other[PATH_MAX + 256], path[PATH_MAX + 64];
+    if (canonical(o->record, rec, sizeof rec) != 0)
+        return 0; /* its folder does not exist: the log cannot be written, said later */
+    static const char *const outs[4] = {"report.json", "trajectory.csv", "summary.png", "frames"};
+    for (int k = 0; k < 5; k++) {
+        if (k < 4)
+            snprintf(path, sizeof path, "%s/%s", o->out_dir, outs[k]);
+        else if (o->video)
+            snprintf(path, sizeof path, "%s", o->video);
+        else
+            continue;
+        if (canonical(path, other, sizeof other) == 0 && strcmp(rec, other) == 0)
+            return usage_error("--record '%s': that is another output of the run", o->record);
+    }
+    return 0;
+}
+
 int ns_cmd_run(int argc, char **argv)
 {
     NsRun r;
@@ -291,6 +347,12 @@ int ns_cmd_run(int argc, char **argv)
     char err[1024] = "";
     ns_cleanup_install();
     int rc = ns_run_outputs_prepare(&r, err, sizeof err) ? -2 : -1;
+    /* --record checked once -o's folder exists (it may be inside it). */
+    if (rc == -1 && check_record_path(&r.opt)) {
+        ns_run_outputs_remove(&r);
+        ns_run_free(&r);
+        return 2;
+    }
     if (rc == -1 && ns_run_load(&r, err, sizeof err) == 0)
         rc = 0;
     rc = rc ? rc : open_logs(&r, err, sizeof err);
@@ -314,9 +376,13 @@ int ns_cmd_run(int argc, char **argv)
             fputs("\r\033[K", stderr); /* the progress line goes before the message */
         size_t n = strlen(r.opt.scenario);
         bool located = strncmp(err, "needlesim", 9) == 0 || strncmp(err, r.opt.scenario, n) == 0;
+        ns_one_line(err);
         fprintf(stderr, "%s%s\n", located ? "" : "needlesim: ", err);
-    } else if (!r.opt.quiet) {
-        print_summary(&r, &res, hash);
+    } else {
+        if (r.note[0]) /* a warning about the replayed log: said once the run has succeeded */
+            fprintf(stderr, "%s\n", r.note);
+        if (!r.opt.quiet)
+            print_summary(&r, &res, hash);
     }
     ns_run_results_free(&res);
     ns_run_free(&r);

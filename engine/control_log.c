@@ -102,24 +102,27 @@ static const char *show_name(const char *s, char out[88])
 }
 
 int ns_control_log_check_scenario(const NsControlLog *log, const char *path, const char *name,
-                                  uint64_t hash, bool rescore, char *err, int err_sz)
+                                  uint64_t hash, bool rescore, char *note, int note_sz, char *err,
+                                  int err_sz)
 {
     char a[88], b[88];
+    if (note_sz > 0)
+        note[0] = '\0';
     if (!log->has_hash) {
-        fprintf(stderr,
-                "needlesim: warning: %s has no #scenario_hash line (an older or hand-written "
-                "log): it is replayed against '%s' unchecked\n",
-                path, show_name(name, a));
+        snprintf(note, (size_t)note_sz,
+                 "needlesim: warning: %s has no #scenario_hash line (an older or hand-written "
+                 "log): it was replayed against '%s' unchecked",
+                 path, show_name(name, a));
         return 0;
     }
     if (log->scenario_hash == hash)
         return 0;
     const char *recorded = log->scenario[0] ? log->scenario : "?";
     if (rescore) {
-        fprintf(stderr,
-                "needlesim: %s: recorded against scenario '%s' (hash %016" PRIx64
-                "), re-scored against '%s' (hash %016" PRIx64 ") as --rescore asks\n",
-                path, show_name(recorded, a), log->scenario_hash, show_name(name, b), hash);
+        snprintf(note, (size_t)note_sz,
+                 "needlesim: %s: recorded against scenario '%s' (hash %016" PRIx64
+                 "), re-scored against '%s' (hash %016" PRIx64 ") as --rescore asks",
+                 path, show_name(recorded, a), log->scenario_hash, show_name(name, b), hash);
         return 0;
     }
     ns_set_err(err, err_sz,

@@ -86,7 +86,8 @@ void ns_control_log_free(NsControlLog *log);
  * scenario 'X' (hash ...), not 'Y' (hash ...); --rescore replays it anyway" in err, or, with
  * rescore, 0 and a note on stderr; without a #scenario_hash line, 0 and a warning on stderr. */
 int ns_control_log_check_scenario(const NsControlLog *log, const char *path, const char *name,
-                                  uint64_t hash, bool rescore, char *err, int err_sz);
+                                  uint64_t hash, bool rescore, char *note, int note_sz, char *err,
+                                  int err_sz);
 
 /* 64-bit FNV-1a (the state hashes' function: sim/tissue.c) of a file's bytes: a regular file
  * of at most max_bytes (`what` names it in messages). Returns 0, or -1 with "path: message" in

@@ -3,11 +3,13 @@
 
 #include <errno.h>
 #include <math.h>
+#include <signal.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/time.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -37,6 +39,7 @@ struct NsLua {
     const char *phase;       /* "loading the scenario", "the run": for messages */
     double deadline;         /* CLOCK_MONOTONIC seconds the phase must end by (0: none) */
     double seconds;          /* the phase's wall-clock limit [s], for messages */
+    double per_call;         /* > 0: the clock applies to each call, not the phase [s] */
     int last_line;           /* last line run in the scenario chunk (see ns_where) */
     const char *source_seen; /* the chunk's source string as Lua holds it, once seen */
     int hook_mask;           /* LUA_MASKCOUNT, plus LUA_MASKLINE while the chunk runs */
@@ -111,6 +114,56 @@ static void *limited_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
 
 static void set_hook(lua_State *L, int mask, int count);
 
+/* The state a protected call is running now, and its hook mask: a timer (every
+ * NS_WATCH_SECONDS while Lua runs) and the stop signals (cleanup.h) set its count hook to fire
+ * at the next instruction, so the wall clock and a signal are seen within a fraction of a
+ * second even when each instruction is long C work (a string.rep, a concatenation of large
+ * strings), not only every NS_HOOK_STEP instructions. lua_sethook may be called from a signal
+ * handler (Lua's manual). */
+#define NS_WATCH_SECONDS 0.2
+static void hook(lua_State *L, lua_Debug *ar);
+static lua_State *volatile active_L;
+static volatile int active_mask;
+static volatile sig_atomic_t forced;
+
+static void force_check(void)
+{
+    lua_State *L = active_L;
+    if (L) {
+        forced = 1;
+        lua_sethook(L, hook, active_mask, 1);
+    }
+}
+
+static void on_alarm(int sig)
+{
+    (void)sig;
+    force_check();
+}
+
+/* Arms (on) or disarms the watch timer. */
+static void watch(bool on)
+{
+    static bool installed;
+    if (!installed) {
+        struct sigaction sa;
+        memset(&sa, 0, sizeof sa);
+        sa.sa_handler = on_alarm;
+        sa.sa_flags = SA_RESTART;
+        sigemptyset(&sa.sa_mask);
+        sigaction(SIGALRM, &sa, NULL);
+        ns_cleanup_on_signal(force_check);
+        installed = true;
+    }
+    struct itimerval it;
+    memset(&it, 0, sizeof it);
+    if (on) {
+        it.it_interval.tv_usec = (long)(NS_WATCH_SECONDS * 1e6);
+        it.it_value = it.it_interval;
+    }
+    setitimer(ITIMER_REAL, &it, NULL);
+}
+
 static double monotonic_s(void)
 {
     struct timespec ts;
@@ -158,7 +211,13 @@ static void hook(lua_State *L, lua_Debug *ar)
         }
         rt->remaining -= NS_LINE_EVENT_COST;
     } else if (ar->event == LUA_HOOKCOUNT) {
-        rt->remaining -= NS_HOOK_STEP;
+        if (forced) { /* a check the watch timer or a signal asked for (see force_check) */
+            forced = 0;
+            rt->remaining -= 1;
+            set_hook(L, rt->hook_mask, NS_HOOK_STEP);
+        } else {
+            rt->remaining -= NS_HOOK_STEP;
+        }
         if (ns_cleanup_signal() != 0)
             exhausted(L, ar, "interrupted by a signal");
         if (rt->deadline > 0.0 && monotonic_s() > rt->deadline) {
@@ -197,30 +256,36 @@ static bool has_location(const char *msg)
  * given the file and line of the Lua function that raised it, so every message has one. */
 static int message_handler(lua_State *L)
 {
-    lua_Debug ar;
+    NsLua *rt = runtime_of(L);
+    /* The text: strings as they are; else a __tostring's string (called protected: it may
+     * fail too); else the value described. */
+    const char *msg = NULL;
     if (lua_type(L, 1) == LUA_TSTRING || lua_type(L, 1) == LUA_TNUMBER) {
-        const char *msg = lua_tostring(L, 1);
-        lua_settop(L, 1);
-        /* A message raised from C with no position ("attempt to yield from outside a
-         * coroutine", a C function's luaL_error) gets the innermost Lua line. */
-        if (has_location(msg) || strncmp(msg, "needlesim", 9) == 0)
-            return 1;
-        for (int level = 1; lua_getstack(L, level, &ar); level++)
-            if (lua_getinfo(L, "Sl", &ar) && ar.currentline > 0) {
-                lua_pushfstring(L, "%s:%d: %s", source_name(&ar), ar.currentline, msg);
-                return 1;
-            }
+        msg = lua_tostring(L, 1);
+    } else if (luaL_getmetafield(L, 1, "__tostring") != LUA_TNIL) {
+        lua_pushvalue(L, 1);
+        if (lua_pcall(L, 1, 1, 0) == LUA_OK && lua_type(L, -1) == LUA_TSTRING)
+            msg = lua_tostring(L, -1);
+    }
+    if (!msg)
+        msg =
+            lua_pushfstring(L, "error (the error value is %s, not a message)", luaL_typename(L, 1));
+    /* A message with no position (raised from C, error("x", 0), a __tostring) gets the
+     * innermost Lua line, else the scenario file. */
+    if (has_location(msg) || strncmp(msg, "needlesim", 9) == 0) {
+        lua_pushstring(L, msg);
         return 1;
     }
-    if (luaL_callmeta(L, 1, "__tostring") && lua_type(L, -1) == LUA_TSTRING)
-        return 1;
+    lua_Debug ar;
     for (int level = 1; lua_getstack(L, level, &ar); level++)
         if (lua_getinfo(L, "Sl", &ar) && ar.currentline > 0) {
-            lua_pushfstring(L, "%s:%d: error (the error value is %s, not a message)",
-                            source_name(&ar), ar.currentline, luaL_typename(L, 1));
+            lua_pushfstring(L, "%s:%d: %s", source_name(&ar), ar.currentline, msg);
             return 1;
         }
-    lua_pushfstring(L, "error (the error value is %s, not a message)", luaL_typename(L, 1));
+    if (rt->scenario_source)
+        lua_pushfstring(L, "%s: %s", rt->scenario_source + 1, msg);
+    else
+        lua_pushstring(L, msg);
     return 1;
 }
 
@@ -242,8 +307,20 @@ int ns_lua_call(NsLua *rt, int nargs, int nresults, char *err, int err_sz)
     }
     lua_pushcfunction(L, message_handler);
     lua_insert(L, base);
+    if (rt->per_call > 0.0) /* the run: each call (a tick of the script) has its own clock */
+        rt->deadline = monotonic_s() + rt->per_call;
     set_hook(L, rt->hook_mask, rt->remaining < NS_HOOK_STEP ? 1 : NS_HOOK_STEP);
+    lua_State *outer = active_L;
+    int outer_mask = active_mask;
+    active_mask = rt->hook_mask;
+    active_L = L;
+    if (!outer)
+        watch(true);
     int rc = lua_pcall(L, nargs, nresults, base);
+    active_L = outer;
+    active_mask = outer_mask;
+    if (!outer)
+        watch(false);
     if (rc == LUA_ERRMEM) {
         /* No message handler runs for memory errors, so no file:line either. */
         snprintf(err, (size_t)err_sz, "%s: not enough memory (a scenario may use %d MiB)",
@@ -536,6 +613,30 @@ static int sandbox_pattern(lua_State *L)
     return lua_gettop(L);
 }
 
+/* string.rep(s, n [, sep]): its output's bytes charged to the budget before it runs (a
+ * quarter of an instruction a byte): one instruction of Lua must not be unbounded C work. */
+static int sandbox_rep(lua_State *L)
+{
+    NsLua *rt = runtime_of(L);
+    size_t l, lsep = 0;
+    luaL_checklstring(L, 1, &l);
+    lua_Integer n = luaL_checkinteger(L, 2);
+    luaL_optlstring(L, 3, "", &lsep);
+    double bytes = n > 0 ? (double)n * (double)(l + lsep) : 0.0;
+    if (bytes > (double)NS_LIMIT_LUA_MEMORY)
+        return luaL_error(L, "string.rep: %d MiB is more than a scenario may hold (%d MiB)",
+                          (int)(bytes / 1048576.0), (int)(NS_LIMIT_LUA_MEMORY >> 20));
+    rt->remaining -= (long long)(bytes / 4.0);
+    if (rt->remaining <= 0) {
+        char buf[200];
+        return exhausted(L, NULL, budget_message(rt, buf, sizeof buf));
+    }
+    lua_pushvalue(L, lua_upvalueindex(1));
+    lua_insert(L, 1);
+    lua_call(L, lua_gettop(L) - 1, 1);
+    return 1;
+}
+
 static void wrap_pattern(lua_State *L, int strtab, const char *name, int is_find)
 {
     lua_getfield(L, strtab, name);
@@ -603,6 +704,9 @@ static int open_sandbox(lua_State *L)
     wrap_pattern(L, strtab, "match", 0);
     wrap_pattern(L, strtab, "gmatch", 0);
     wrap_pattern(L, strtab, "gsub", 0);
+    lua_getfield(L, strtab, "rep");
+    lua_pushcclosure(L, sandbox_rep, 1);
+    lua_setfield(L, strtab, "rep");
     lua_pop(L, 1);
 
     /* Deterministic random numbers unless the scenario reseeds. */
@@ -648,7 +752,7 @@ NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
     lua_atpanic(rt->L, panic);
     rt->hook_mask = LUA_MASKCOUNT;
     ns_lua_begin_phase(rt, "loading the scenario", NS_LIMIT_LOAD_INSTRUCTIONS,
-                       NS_LIMIT_LOAD_SECONDS);
+                       NS_LIMIT_LOAD_SECONDS, 0.0);
     lua_pushcfunction(rt->L, open_sandbox);
     if (ns_lua_call(rt, 0, 0, err, err_sz) != 0) {
         ns_lua_close(rt);
@@ -684,11 +788,13 @@ const char *ns_lua_scenario_dir(const NsLua *rt)
     return rt->scenario_dir;
 }
 
-void ns_lua_begin_phase(NsLua *rt, const char *phase, long long instructions, double seconds)
+void ns_lua_begin_phase(NsLua *rt, const char *phase, long long instructions, double seconds,
+                        double per_call_seconds)
 {
     rt->phase = phase;
     rt->budget = rt->remaining = instructions;
-    rt->seconds = seconds;
+    rt->per_call = per_call_seconds;
+    rt->seconds = per_call_seconds > 0.0 ? per_call_seconds : seconds;
     rt->deadline = seconds > 0.0 ? monotonic_s() + seconds : 0.0;
 }
 

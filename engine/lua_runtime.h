@@ -36,12 +36,14 @@ const char *ns_lua_scenario_dir(const NsLua *rt);
 /* Starts a phase ("loading the scenario" is begun by ns_lua_open; the run begins "the run"):
  * every ns_lua_call until the next phase draws on `instructions` Lua instructions in all and
  * must end within `seconds` of wall-clock time from now (0: no limit). phase is a static
- * string used in messages. */
-void ns_lua_begin_phase(NsLua *rt, const char *phase, long long instructions, double seconds);
+ * string used in messages. per_call_seconds > 0: each call must also end within that many
+ * seconds (the run's ticks). */
+void ns_lua_begin_phase(NsLua *rt, const char *phase, long long instructions, double seconds,
+                        double per_call_seconds);
 
 /* lua_pcall of the function below nargs arguments on the stack, with the message handler, on
- * what is left of the phase's budget. Returns 0 with nresults values pushed, or -1 with the stack back where it
- * was minus the function and arguments, and a one-line message in err. */
+ * what is left of the phase's budget. Returns 0 with nresults values pushed, or -1 with the stack
+ * back where it was minus the function and arguments, and a one-line message in err. */
 int ns_lua_call(NsLua *rt, int nargs, int nresults, char *err, int err_sz);
 
 /* Loads the scenario file (text only, chunkname "@path") and runs it; pushes its first

@@ -74,3 +74,10 @@ int ns_names_check_run(const NsScenario *sc, const NsRunSpec *spec, char *err, i
             return -1;
     return 0;
 }
+
+void ns_one_line(char *s)
+{
+    for (; *s; s++)
+        if ((unsigned char)*s < 0x20 || *s == 0x7f)
+            *s = ' ';
+}

@@ -18,4 +18,8 @@ int ns_name_check(const char *name, char *why, int why_sz);
  * in err (the place of the ns.scenario{} call). */
 int ns_names_check_run(const NsScenario *sc, const NsRunSpec *spec, char *err, int err_sz);
 
+/* Makes a message one line for the terminal: control characters (a newline a scenario put in a
+ * string the message quotes) become spaces. */
+void ns_one_line(char *s);
+
 #endif

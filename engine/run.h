@@ -87,6 +87,8 @@ typedef struct NsRun {
     FILE *rec;
     NsControlLog replay;
     bool made_dir, progress_shown, script_finished;
+    char note[512];      /* a warning for stderr once the run has succeeded (the replayed log) */
+    size_t made_from;    /* made_dir: the first folder made for -o is opt.out_dir[0 .. made_from) */
     bool time_capped;    /* stopped at NS_LIMIT_DEFAULT_SIM_TIME with the script still running */
     long max_steps;      /* the run's steps (0: until the script ends) */
     long time_cap;       /* steps after which an unfinished script is stopped */

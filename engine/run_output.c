@@ -38,6 +38,28 @@ char *ns_run_path_join(const char *dir, const char *name)
 /* Creates DIR (and its parents) when missing, removes the report and trajectory of an earlier
  * run there (this run replaces them; a failed one leaves neither), and opens the trajectory's
  * temporary file, which also proves DIR writable before anything runs. */
+/* Removes the folders this run made for -o, deepest first, each only if empty. */
+static void remove_made(NsRun *r)
+{
+    if (!r->made_dir)
+        return;
+    size_t n = strlen(r->opt.out_dir);
+    char *path = malloc(n + 1);
+    if (path) {
+        memcpy(path, r->opt.out_dir, n + 1);
+        for (size_t i = n; i >= r->made_from && i > 0; i--) {
+            if (path[i] != '/' && path[i] != '\0')
+                continue;
+            path[i] = '\0';
+            ns_cleanup_forget(path);
+            if (rmdir(path) != 0)
+                break;
+        }
+        free(path);
+    }
+    r->made_dir = false;
+}
+
 int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz)
 {
     size_t n = strlen(r->opt.out_dir);
@@ -64,8 +86,10 @@ int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz)
                 free(path);
                 return -1;
             }
-            if (c == '\0')
-                r->made_dir = true;
+            if (!r->made_dir)
+                r->made_from = i; /* the first folder this run made: path[0 .. i) */
+            r->made_dir = true;
+            ns_cleanup_add(path); /* a second stop signal removes it too (if empty) */
         } else if (!S_ISDIR(sb.st_mode)) {
             ns_set_err(err, err_sz, "cannot create output folder '%s': '%s' is not a folder",
                        r->opt.out_dir, path);
@@ -92,10 +116,8 @@ int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz)
          (r->opt.record && ns_out_replaceable(r->opt.record, "the control log", err, err_sz)) ||
          (r->opt.video && ns_out_replaceable(r->opt.video, "the video", err, err_sz))))
         rc = -1;
-    if (rc == 0) {
-        ns_out_remove_old(old_t);
-        ns_out_remove_old(old_r);
-    }
+    /* An earlier run's outputs stay until this run succeeds: the renames at the end replace
+     * them, and a failed run leaves them as they were. */
     free(old_t);
     free(old_r);
     if (rc == 0 && ns_run_render_clear_old(r->opt.out_dir, r->opt.frames, err, err_sz))
@@ -105,10 +127,8 @@ int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz)
         if (!r->traj)
             rc = -1;
     }
-    if (rc != 0 && r->made_dir) {
-        rmdir(r->opt.out_dir);
-        r->made_dir = false;
-    }
+    if (rc != 0)
+        remove_made(r);
     return rc;
 }
 
@@ -141,8 +161,7 @@ void ns_run_outputs_remove(NsRun *r)
         ns_run_render_abort(&r->rr);
         r->rendering = false;
     }
-    if (r->made_dir)
-        rmdir(r->opt.out_dir); /* only if empty: it is ours */
+    remove_made(r);
 }
 
 int ns_run_outputs_commit(NsRun *r, char *err, int err_sz)

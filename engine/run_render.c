@@ -122,11 +122,9 @@ int ns_run_render_clear_old(const char *out_dir, bool frames, char *err, int err
                        "or write to another folder",
                        dir);
             rc = -1;
-        } else {
-            ns_out_remove_old(sheet);
-            if (only > 0)
-                remove_frames_dir(dir);
         }
+        /* The old sheet and frames stay until this run's replace them (ns_run_render_commit):
+         * a failed run leaves them as they were. */
     }
     free(sheet);
     free(dir);
@@ -318,7 +316,12 @@ static int write_sheet(NsRunRender *rr, const char *title, const char *const *ta
     int y0 = title_h + rows_m * (th + cap_h + pad) + pad;
     for (int i = 0; i < rows; i++)
         ns_font_draw(mono, &sheet, pad, y0 + i * lh + ns_font_ascent(mono), table[i], fg);
-    int rc = ns_image_write_png(&sheet, rr->summary_tmp, err, err_sz);
+    /* A fresh file: whatever is at the temporary name (a hard link to another file, say) is
+     * unlinked, not written through; a non-regular one was refused at open. */
+    ns_out_remove_old(rr->summary_tmp);
+    int rc = ns_out_replaceable(rr->summary_tmp, "the contact sheet", err, err_sz)
+                 ? -1
+                 : ns_image_write_png(&sheet, rr->summary_tmp, err, err_sz);
     ns_image_free(&sheet);
     ns_font_close(mono);
     ns_font_close(small);

@@ -113,7 +113,8 @@ int ns_run_script_start(NsRun *r, char *err, int err_sz)
     lua_State *L = ns_lua_state(r->sc.lua);
     TickIO io = {.r = r};
     /* One budget for the whole of the run's script and on_tick calls (sim/ns_limits.h). */
-    ns_lua_begin_phase(r->sc.lua, "the run's script", NS_LIMIT_RUN_INSTRUCTIONS, 0.0);
+    ns_lua_begin_phase(r->sc.lua, "a tick of the run's script", NS_LIMIT_RUN_INSTRUCTIONS, 0.0,
+                       NS_LIMIT_TICK_SECONDS);
     lua_pushcfunction(L, start_body);
     lua_pushlightuserdata(L, &io);
     return ns_lua_call(r->sc.lua, 1, 0, err, err_sz);

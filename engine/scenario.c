@@ -396,6 +396,15 @@ NsShape *scn_shape_from_lua(Builder *b, int idx, const char *ctx_where, const ch
                  ctx_where, ctx, SHAPE_DEPTH_MAX);
         return NULL;
     }
+    /* A shape used twice is copied twice (a tree, not a graph): s = union(s, s) forty times is
+     * 2^40 nodes. The whole tissue's count is bounded (sim/ns_limits.h). */
+    if (++b->shape_nodes > NS_LIMIT_SHAPE_NODES) {
+        scn_fail(b,
+                 "%s: %s: the shapes have more than %d nodes in all (a shape used many "
+                 "times over is copied each time)",
+                 ctx_where, ctx, NS_LIMIT_SHAPE_NODES);
+        return NULL;
+    }
     if (!lua_checkstack(L, 8)) {
         scn_fail(b, "%s: %s: out of memory", ctx_where, ctx);
         return NULL;

@@ -89,6 +89,11 @@ const char **ns_scenario_region_names(const NsScenario *sc);
 
 const char *ns_material_model_name(NsElasticModel m);
 
+/* The memory the mesher may plan to use for the process's later loads [bytes]; 0 (the
+ * default): NS_LIMIT_MESHER_BYTES. The fuzz harness lowers it, so that every input meshes in
+ * well under its time limit. */
+void ns_scenario_set_mesher_budget(double bytes);
+
 /* The scenario's tissue as a simulation model: region r's material becomes material r
  * (damping as the shear damping coefficient), fixed regions' nodes are held. params may be
  * NULL (defaults). Returns 0, or -1 with a message. */

@@ -9,6 +9,7 @@
 
 #include <lauxlib.h>
 
+#include "cleanup.h"
 #include "mesh_io.h"
 #include "mesher.h"
 #include "ns_limits.h"
@@ -28,8 +29,20 @@ static int alloc_regions(Builder *b, int n, const char *where)
 
 /* Runs the mesher and turns its failure into one line naming the tissue: a function shape's
  * own error first (it is why the mesher stopped), then the mesher's message. */
-static int run_mesher(Builder *b, const NsMesherDef *def, const char *where, const char *ctor)
+/* The mesher's memory budget (0: NS_LIMIT_MESHER_BYTES); see scenario.h. */
+static double mesher_budget;
+
+void ns_scenario_set_mesher_budget(double bytes)
 {
+    mesher_budget = bytes;
+}
+
+static int run_mesher(Builder *b, const NsMesherDef *def_in, const char *where, const char *ctor)
+{
+    NsMesherDef d = *def_in;
+    d.max_bytes = mesher_budget;
+    d.cancel = ns_cleanup_stop_flag(); /* a stop signal ends the meshing, not just the run */
+    const NsMesherDef *def = &d;
     char merr[512];
     NsScenario *sc = b->sc;
     if (ns_mesher_stuff(def, &sc->mesh, &sc->mesher_stats, merr, (int)sizeof merr) != 0) {

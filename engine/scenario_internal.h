@@ -34,6 +34,7 @@ struct Builder {
     char fn_err[1024];
     bool have_bounds; /* ns.tissue.shapes{bounds = ...} was given */
     double blo[3], bhi[3];
+    int shape_nodes; /* shape nodes made so far (NS_LIMIT_SHAPE_NODES) */
 };
 
 /* One line in b->err (printf style); returns -1. */

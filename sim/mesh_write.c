@@ -9,6 +9,8 @@
 #include "quality.h"
 
 #include <errno.h>
+#include <sys/stat.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <math.h>
 #include <stdarg.h>
@@ -66,7 +68,15 @@ static int atomic_open(AtomicFile *af, const char *path, char *err, int err_sz)
     }
     memcpy(af->tmp, path, n);
     memcpy(af->tmp + n, ".tmp", 5);
-    af->f = fopen(af->tmp, "w");
+    /* Created fresh: an old regular "path.tmp" is removed first, and nothing else is followed
+     * or written through (a symbolic or hard link there must not redirect the write). */
+    struct stat st;
+    if (lstat(af->tmp, &st) == 0 && S_ISREG(st.st_mode))
+        unlink(af->tmp);
+    int fd = open(af->tmp, O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+    af->f = fd >= 0 ? fdopen(fd, "w") : NULL;
+    if (!af->f && fd >= 0)
+        close(fd);
     if (!af->f) {
         ns_set_err(err, err_sz, "%s: cannot create %s: %s", path, af->tmp, strerror(errno));
         free(af->tmp);
@@ -91,6 +101,12 @@ static int atomic_close(AtomicFile *af, const char *path, char *err, int err_sz)
     }
     if (fclose(af->f) != 0 && rc == 0) {
         ns_set_err(err, err_sz, "%s: write error: %s", path, strerror(errno));
+        rc = -1;
+    }
+    struct stat st;
+    if (rc == 0 && lstat(path, &st) == 0 && !S_ISREG(st.st_mode)) {
+        ns_set_err(err, err_sz, "%s exists and is not a regular file: refusing to replace it",
+                   path);
         rc = -1;
     }
     if (rc == 0 && rename(af->tmp, path) != 0) {

@@ -836,10 +836,21 @@ static int stuff_tet(Ctx *c, const Local *L, char *err, int err_sz)
 
 /* Every lattice tet once: for each pair of centres C0, C1 = C0 + 2 e_a, the four corners of the
  * square face between them form a ring; each ring edge (a long edge) and C0-C1 span a tet. */
+/* The caller asked the mesher to stop (NsMesherDef.cancel). */
+static bool cancelled(const Ctx *c, char *err, int err_sz)
+{
+    if (!c->def->cancel || *c->def->cancel == 0)
+        return false;
+    ns_set_err(err, err_sz, "mesher: interrupted");
+    return true;
+}
+
 static int stuff_all(Ctx *c, char *err, int err_sz)
 {
     static const int ring[4][2] = {{-1, -1}, {1, -1}, {1, 1}, {-1, 1}};
     for (int64_t id = c->ncorner; id < c->nvert; id++) {
+        if ((id & 1023) == 0 && cancelled(c, err, err_sz))
+            return -1;
         int C0[3];
         vertex_coords(c, id, C0);
         for (int a = 0; a < 3; a++) {
@@ -986,13 +997,13 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
      * NS_MESHER_BYTES_PER_VERTEX a lattice vertex (measured: docs/mesher.md). The spacing that
      * would fit scales with the cube root. */
     double bytes = count * NS_MESHER_BYTES_PER_VERTEX;
-    if (count > (double)NS_MAX_LATTICE_VERTICES || bytes > (double)NS_LIMIT_MESHER_BYTES) {
-        double fit = h * cbrt(bytes / (double)NS_LIMIT_MESHER_BYTES) * 1.02;
+    double most = def->max_bytes > 0.0 ? def->max_bytes : (double)NS_LIMIT_MESHER_BYTES;
+    if (count > (double)NS_MAX_LATTICE_VERTICES || bytes > most) {
+        double fit = h * cbrt(bytes / most) * 1.02;
         ns_set_err(err, err_sz,
                    "mesher: spacing %g m needs %.0f lattice vertices, about %.1f GiB (at most "
                    "%.1f GiB): a spacing of %.2g m or more fits",
-                   h, count, bytes / 1073741824.0, (double)NS_LIMIT_MESHER_BYTES / 1073741824.0,
-                   fit);
+                   h, count, bytes / 1073741824.0, most / 1073741824.0, fit);
         return -1;
     }
     c->h = h;
@@ -1008,6 +1019,8 @@ static int setup(Ctx *c, const NsMesherDef *def, char *err, int err_sz)
     }
     c->stats.lattice_vertices = (int)c->nvert;
     for (int64_t v = 0; v < c->nvert; v++) {
+        if ((v & 4095) == 0 && cancelled(c, err, err_sz))
+            return -1;
         int I[3];
         double p[3];
         vertex_coords(c, v, I);

@@ -10,6 +10,8 @@
 #ifndef NS_MESHER_H
 #define NS_MESHER_H
 
+#include <signal.h>
+
 #include <stdbool.h>
 
 #include "mesh.h"
@@ -32,6 +34,12 @@ typedef struct NsMesherDef {
     /* Lattice box. If lo[0] > hi[0] it is taken from the regions' bounds. The lattice is
      * anchored at lo, so a box whose faces lie on lo + k*h is meshed with flat faces. */
     double lo[3], hi[3];
+    /* The memory the mesh may take [bytes], estimated before anything is allocated; 0:
+     * NS_LIMIT_MESHER_BYTES (sim/ns_limits.h). */
+    double max_bytes;
+    /* When set and *cancel becomes non-zero (a stop signal), the mesher stops with an error
+     * "interrupted" within a few thousand lattice vertices. */
+    const volatile sig_atomic_t *cancel;
 } NsMesherDef;
 
 /* Spacing 0 (must be set), the published parameters alpha_long = 0.24999,

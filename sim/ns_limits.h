@@ -46,6 +46,8 @@
 #define NS_LIMIT_LOAD_INSTRUCTIONS 500000000LL
 /* Lua VM instructions for the whole of a run's script and on_tick calls, all together. */
 #define NS_LIMIT_RUN_INSTRUCTIONS 5000000000LL
+/* Wall-clock time one tick of a run's script and on_tick may take [s]. */
+#define NS_LIMIT_TICK_SECONDS 10.0
 /* Memory one scenario's Lua state may hold [bytes]. */
 #define NS_LIMIT_LUA_MEMORY ((size_t)256 << 20)
 /* Wall-clock time loading a scenario may take, meshing included [s]. */
@@ -72,6 +74,10 @@
 /* Memory the mesher may plan to use [bytes], estimated from the lattice before it allocates;
  * past it the message states the coarsest resolution that would fit. */
 #define NS_LIMIT_MESHER_BYTES ((long long)2 << 30)
+
+/* Shape nodes (primitives, CSG operations, functions) in one tissue: the mesher evaluates
+ * every node at every lattice vertex. */
+#define NS_LIMIT_SHAPE_NODES 10000
 
 /* ---- names -------------------------------------------------------------------------------- */
 

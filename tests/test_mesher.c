@@ -643,7 +643,7 @@ static int test_errors(void)
         return 1;
     def.region_count = 1;
     def.spacing = 1e-5; /* 4000^3 cells */
-    if (expect_error(&def, "lattice too large"))
+    if (expect_error(&def, "lattice vertices"))
         return 1;
     def.spacing = 0.004;
     region.shape = NULL;
