@@ -1,7 +1,7 @@
 /* Needle-tissue coupling (sim/coupling.h): the coupled step of Algorithm 1, the friction model of
- * §3.3 (Eq. 7-11), Algorithm 3's state search with the paper's solver (ours is in
- * coupled_schur.c), the tip remeshing call (Algorithm 2, sim/remesh.c) and the needle
- * reparameterization of §3.4.2 after each step. */
+ * §3.3 (Eq. 7-8; the friction checks of Eq. 9-11 are friction.c, Algorithm 3 with each solver
+ * coupled_paper.c and coupled_schur.c), the tip remeshing call (Algorithm 2, sim/remesh.c) and the
+ * needle reparameterization of §3.4.2 after each step. */
 #include "coupling.h"
 #include "coupling_internal.h"
 #include "quality.h"
@@ -255,166 +255,6 @@ void ns_coupled_free(NsCoupled *c)
     coupled_schur_destroy(c->schur);
     ns_remesh_stack_free(&c->remesh);
     memset(c, 0, sizeof *c);
-}
-
-/* ---- the pieces of Eq. 7-11 shared by both solvers ---- */
-
-void coupled_point(const CoupledSystem *S, int k, const double *v, double *out)
-{
-    const double *a = v + 3 * S->ta[k], *b = v + 3 * S->tb[k];
-    for (int i = 0; i < 3; i++)
-        out[i] = (1.0 - S->tw[k]) * a[i] + S->tw[k] * b[i];
-}
-
-double coupled_known_force(const CoupledSystem *S, int k, int s)
-{
-    if (s == NS_FRICTION_DYN_POS)
-        return -(S->f[k] + (k == S->tip ? S->f_cut : 0.0)); /* the tip cuts: Eq. 10's f_cut */
-    if (s == NS_FRICTION_DYN_NEG)
-        return S->f[k];
-    return 0.0;
-}
-
-double coupled_rel_slide(const CoupledSystem *S, int k, const double *at, const double *ar)
-{
-    double ah[3];
-    coupled_point(S, k, at, ah);
-    const double *an = ar + 3 * S->idx[k], *t = S->R + 9 * k;
-    double d = 0.0;
-    for (int i = 0; i < 3; i++)
-        d += t[i] * (S->yrel[3 * k + i] + S->bdt2 * (ah[i] - an[i]));
-    return d;
-}
-
-/* Slack of the checks: forces within 1e-6 of the threshold, slides of 1e-10 m, count as met
- * (the solves are iterative; a node exactly at its threshold must not flip back and forth). */
-#define FORCE_SLACK 1e-3
-#define SLIDE_SLACK 1e-9
-
-/* Checks node k (Eq. 9-11) in state s with forces cf and relative slide (tissue minus needle);
- * returns the state a flip would give (s itself where consistent). */
-static uint8_t check_node(const CoupledSystem *S, int k, uint8_t s, const double *cf, double slide)
-{
-    if (s == NS_FRICTION_STATIC) {
-        /* Eq. 9 / 10: the tangential force on the needle within the static threshold (the tip
-         * also holds back up to f_cut before it cuts). */
-        double c1 = cf[3 * k], hi = S->f[k], lo = -(S->f[k] + (k == S->tip ? S->f_cut : 0.0));
-        double slack = FORCE_SLACK * (S->f[k] + S->f_cut) + 1e-12;
-        if (c1 > hi + slack || c1 < lo - slack)
-            return c1 < 0.0 ? NS_FRICTION_DYN_POS : NS_FRICTION_DYN_NEG;
-    } else if (s != NS_FRICTION_FREE) {
-        /* Eq. 11: the needle slides in its state's direction (needle minus tissue along t). */
-        double sgn = s == NS_FRICTION_DYN_POS ? 1.0 : -1.0;
-        if (-sgn * slide < -SLIDE_SLACK)
-            return NS_FRICTION_STATIC;
-    }
-    return s;
-}
-
-int coupled_check_slides(const CoupledSystem *S, const uint8_t *st, const double *cf,
-                         const double *slide, uint8_t *next)
-{
-    int bad = 0;
-    for (int k = 0; k < S->q; k++) {
-        next[k] = check_node(S, k, st[k], cf, slide[k]);
-        bad += next[k] != st[k];
-    }
-    return bad;
-}
-
-int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, const double *at,
-                  const double *ar, uint8_t *next)
-{
-    int bad = 0;
-    for (int k = 0; k < S->q; k++) {
-        double slide = st[k] == NS_FRICTION_STATIC ? 0.0 : coupled_rel_slide(S, k, at, ar);
-        next[k] = check_node(S, k, st[k], cf, slide);
-        bad += next[k] != st[k];
-    }
-    return bad;
-}
-
-int tried_add(TriedSet *T, const uint8_t *st)
-{
-    if (T->count == T->cap) {
-        int cap = T->cap ? 2 * T->cap : 16;
-        uint8_t *p = realloc(T->cfg, (size_t)cap * (size_t)(T->q > 0 ? T->q : 1));
-        if (!p)
-            return -1;
-        T->cfg = p;
-        T->cap = cap;
-    }
-    memcpy(T->cfg + (size_t)T->count * (size_t)T->q, st, (size_t)T->q);
-    T->count++;
-    return 0;
-}
-
-static int tried_has(const TriedSet *T, const uint8_t *st)
-{
-    for (int i = 0; i < T->count; i++)
-        if (memcmp(T->cfg + (size_t)i * (size_t)T->q, st, (size_t)T->q) == 0)
-            return 1;
-    return 0;
-}
-
-void tried_next(const TriedSet *T, uint8_t *st)
-{
-    /* Digits STATIC < DYNAMIC- < DYNAMIC+ per coupling node, node 0 (the entry) least
-     * significant; bounded, since 3^q may be astronomically large. */
-    for (int guard = 0; guard < 100000 && tried_has(T, st); guard++)
-        for (int k = 0; k < T->q; k++) {
-            if (st[k] == NS_FRICTION_STATIC) {
-                st[k] = NS_FRICTION_DYN_NEG;
-                break;
-            }
-            if (st[k] == NS_FRICTION_DYN_NEG) {
-                st[k] = NS_FRICTION_DYN_POS;
-                break;
-            }
-            st[k] = NS_FRICTION_STATIC; /* carry */
-        }
-}
-
-/* Algorithm 3 with the paper's solver: CG on Eq. 7 per trial, warm-started from the previous
- * trial, checked at tau_check, finished to tau_sol. */
-static int paper_lcp(CoupledSystem *S, NsCouplingStats *st)
-{
-    const NsCouplingParams *p = &S->c->params;
-    TriedSet T = {0, 0, S->q, NULL};
-    uint8_t *next = malloc((size_t)(S->q > 0 ? S->q : 1));
-    int rc = next ? 0 : -1;
-    st->consistent = 0;
-    for (int trial = 0; trial < p->max_trials && rc == 0; trial++) {
-        if (tried_add(&T, S->st)) {
-            rc = -1;
-            break;
-        }
-        st->trials++;
-        if (coupled_paper_solve(S, p->tau_check, p->max_iter, &st->iterations)) {
-            rc = -1;
-            break;
-        }
-        if (coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0) {
-            if (coupled_paper_solve(S, p->tau_sol, p->max_iter, &st->iterations)) {
-                rc = -1;
-                break;
-            }
-            if (coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0) {
-                st->consistent = 1;
-                break;
-            }
-        }
-        memcpy(S->st, next, (size_t)S->q);
-        tried_next(&T, S->st);
-    }
-    if (rc == 0 && !st->consistent) { /* accept the last configuration (§3.6.1) */
-        rc = coupled_paper_solve(S, p->tau_sol, p->max_iter, &st->iterations);
-        st->consistent = rc == 0 && coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0;
-    }
-    st->unconverged = rc == 0 && !S->converged;
-    free(next);
-    free(T.cfg);
-    return rc;
 }
 
 /* Worst and largest dihedral angles of the tets around the path's last three nodes. */
@@ -1259,19 +1099,6 @@ static int bevel_force(NsCoupled *c, const double *ext_tissue, const double *ext
     return 0;
 }
 
-void coupled_unit_scale(const CoupledSystem *S, double *sc)
-{
-    for (int i = 0; i < S->nt3; i += 3) { /* one look-up per node */
-        const double *blk = ns_bsm_find(S->At, i / 3, i / 3);
-        for (int c = 0; c < 3 && i + c < S->nt3; c++)
-            sc[i + c] = blk && blk[4 * c] > 0.0 ? 1.0 / sqrt(blk[4 * c]) : 1.0;
-    }
-    for (int i = 0; i < S->nr3; i++) {
-        const double *blk = ns_banded_block((NsBanded *)S->Ar, i / 3, i / 3);
-        sc[S->nt3 + i] = blk && blk[4 * (i % 3)] > 0.0 ? 1.0 / sqrt(blk[4 * (i % 3)]) : 1.0;
-    }
-}
-
 /* sum over the rows not fixed of x_i y_i */
 static double free_dot(const double *x, const double *y, const uint8_t *fixed, int n)
 {
@@ -1522,7 +1349,7 @@ static int coupled_step(NsCoupled *c, double dt, const double *ext_tissue, const
         c->schur = coupled_schur_create(); /* the solver was switched after init */
     int rc = -1;
     if (c->params.solver == NS_COUPLED_PAPER)
-        rc = paper_lcp(&S, &st);
+        rc = coupled_paper_lcp(&S, &st);
     else if (c->schur)
         rc = coupled_schur_lcp(c->schur, &S, &st);
     int finite = rc == 0;

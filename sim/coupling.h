@@ -41,18 +41,12 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "friction.h"
 #include "needle_path.h"
 #include "remesh.h"
 #include "rod.h"
 #include "solver.h"
 #include "tissue.h"
-
-typedef enum NsFriction {
-    NS_FRICTION_FREE = 0,
-    NS_FRICTION_STATIC = 1,
-    NS_FRICTION_DYN_NEG = 2, /* the needle slides backward (out of the tissue) */
-    NS_FRICTION_DYN_POS = 3, /* the needle slides forward (towards its tip) */
-} NsFriction;
 
 typedef enum NsCoupledSolverKind {
     NS_COUPLED_SCHUR = 0, /* ours, the default: stale factor, dense compliance, projected PCG */
