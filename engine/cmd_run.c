@@ -40,6 +40,7 @@
 #include "run_render.h"
 #include "run_spec.h"
 #include "scenario.h"
+#include "step.h"
 #include "tissue.h"
 
 static const char run_usage[] =
@@ -1810,21 +1811,19 @@ static int run_loop(Run *r, char *err, int err_sz)
             ns_control_log_write_row(r->rec, t, &ctl);
         if (ctl.next_needle && next_needle(r, &ctl.entry, t, err, err_sz))
             return -1;
-        r->rod.v_insert = ctl.v_insert;
-        memcpy(r->rod.v_base, ctl.v_base, sizeof ctl.v_base);
-        r->rod.twist_rate = ctl.twist_rate;
+        NsStepControls step_ctl = ns_step_controls(ctl.v_insert, ctl.v_base, ctl.twist_rate);
         if (ctl.drop_seed && release_seed(r, t, err, err_sz))
             return -1;
-        if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
+        if (ctl.v_insert > 0.0 && r->prev_v <= 0.0)
             r->insertions++;
-        r->prev_v = r->rod.v_insert;
+        r->prev_v = ctl.v_insert;
         if (r->rendering && render_before_step(r)) {
             ns_set_err(err, err_sz, "out of memory");
             return -1;
         }
         NsCouplingStats st;
         double w0 = now_s();
-        int rc = ns_coupled_step(&r->c, sp->dt, NULL, NULL, &st);
+        int rc = ns_step(&r->c, &step_ctl, sp->dt, &st);
         double w = 1e3 * (now_s() - w0);
         r->nan += st.nan_count;
         if (rc) {

@@ -1,4 +1,4 @@
-/* Shared between the coupling driver (coupling.c) and its two LCP solvers
+/* Shared between the coupling driver (coupling.c, step.c) and its two LCP solvers
  * (coupled_paper.c, coupled_schur.c), each complete in its file: Algorithm 3 on the coupled
  * system of one step (Eq. 7, sim/coupled_system.h) with the friction checks of sim/friction.h. */
 #ifndef NS_COUPLING_INTERNAL_H
@@ -7,6 +7,41 @@
 #include "coupled_system.h"
 #include "coupling.h"
 #include "friction.h"
+
+/* coupling.c: the coupling arrays grown to cap needle nodes (0, or -1: memory); the needle's
+ * nodes from `first` on coupled to the path (keep_state: the states of nodes that stay coupled
+ * kept, else STATIC); needle node i's tissue point of the field v. */
+int coupled_reserve(NsCoupled *c, int cap);
+void coupled_from_path(NsCoupled *c, int first, int keep_state);
+void coupled_tissue_point(const NsCoupled *c, int i, const double *v, double *out);
+
+/* coupled_assemble.c: the coupled system of one step (Eq. 7-8, §3.3). */
+/* Our bevel model (NS_BEVEL_FORCE): *f_out the lateral force on the tip [N] (0: none); *et,
+ * *er the caller's external loads copied with it added, to be freed (NULL: no force). 0, or -1
+ * (memory). */
+int coupled_bevel_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
+                       double **et, double **er);
+int coupled_count(const NsCoupled *c); /* coupling nodes now */
+/* Scratch sizes of the system of q coupling nodes: doubles, ints (and q + 1 bytes). */
+size_t coupled_system_doubles(int q);
+size_t coupled_system_ints(int q);
+/* Builds S from the needle's system sys and the tissue's right-hand side bt
+ * (ns_tissue_begin_step) in the scratch w, iw, sw: frames, thresholds, constraint right-hand
+ * sides, viscous friction (added to sys, bt and the tissue matrix), the tissue's accelerations
+ * as the start. */
+void coupled_assemble(NsCoupled *c, double dt, NsRodSystem *sys, double *bt, double *w, int *iw,
+                      uint8_t *sw, CoupledSystem *S);
+/* The solvers' starting accelerations (docs/coupling.md, "The starting guess"). 0, or -1. */
+int coupled_scale_start(CoupledSystem *S);
+/* cf: the known (dynamic) tangential forces of the states S->st, 0 elsewhere. */
+void coupled_known_forces(CoupledSystem *S);
+
+/* coupling_tip.c: the tip's cut after the update (along the path, or remeshing, Algorithm 2);
+ * the tip's node released from bone. */
+int coupled_cut_tip(NsCoupled *c, NsCouplingStats *st);
+void coupled_unpin_tip(NsCoupled *c);
+/* coupling_reparam.c: the needle rebuilt on its tissue points (§3.4.2). */
+int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st);
 
 /* Our solver (coupled_schur.c): its state kept between steps, and Algorithm 3 with it. */
 typedef struct CoupledSchur CoupledSchur;
