@@ -791,23 +791,16 @@ static int breaks_chain(const NsRemeshTip *tip, const Candidate *c)
     return 0;
 }
 
-int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_new[3],
-                  NsRemeshResult *res, char *err, int err_sz)
+/* Algorithm 2's candidate operations for the tip at u_new in tet t: line 2 (the tip node
+ * snaps), line 5 (penetrating: a node at u_new, u1 sliding), line 10 (retracting: u1 leaves the
+ * needle), lines 6-8 (the split that made u1 undone first: top_made_u1) and our addition for a
+ * snapped tip. undo_nodes: the tet holding u_new after that undo (-1s: none). Returns the
+ * count. */
+static int tip_candidates(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, int t,
+                          const double u_new[3], int top_made_u1, Candidate *cand,
+                          int undo_nodes[4])
 {
-    memset(res, 0, sizeof *res);
     int u1 = tip->u1, u2 = tip->u2, u3 = tip->u3;
-    if (!ns_mesh_node_alive(m, u1) || !ns_mesh_node_alive(m, u2)) {
-        snprintf(err, (size_t)err_sz, "remesh: the needle's tip nodes are not alive");
-        return -1;
-    }
-    int t = ns_mesh_locate(m, u_new, tip->hint_tet, 1e-9, NULL);
-    if (t < 0) {
-        snprintf(err, (size_t)err_sz, "remesh: the tip (%.4g, %.4g, %.4g) m is outside the tissue",
-                 u_new[0], u_new[1], u_new[2]);
-        return -1;
-    }
-    int top_made_u1 = s->count > 0 && s->ops[s->count - 1].node == u1;
-    Candidate cand[64];
     int nc = 0;
     /* Line 2: the tip node snaps to u_new. */
     cand[nc++] = (Candidate){0, NS_REMESH_SNAP, {u1, -1, -1, -1}, -1, -1, 0};
@@ -846,7 +839,7 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             cand[nc++] = c;
         }
     }
-    int t_undo = -1, undo_nodes[4] = {-1, -1, -1, -1};
+    int t_undo = -1;
     if (top_made_u1) {
         /* Lines 6-8: undo the split that made u1, then a standard operation on the tet that will
          * contain u_new, joined to (or being) u2; u2 then slides on [u_new, u3]. The tet after
@@ -863,7 +856,7 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             t_undo = ns_mesh_locate(
                 m, u_new, m->node_tets[u2].count ? m->node_tets[u2].items[0] : -1, 1e-9, NULL);
             if (t_undo >= 0)
-                memcpy(undo_nodes, m->tet_node + 4 * t_undo, sizeof undo_nodes);
+                memcpy(undo_nodes, m->tet_node + 4 * t_undo, 4 * sizeof *undo_nodes);
             Candidate su[15];
             int nsu = t_undo >= 0 ? standard_ops(m, t_undo, su) : 0;
             for (int i = 0; i < nsu && nc < 64; i++) {
@@ -877,35 +870,50 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             node_restore(m, &keep);
         }
     }
-    /* The region: nodes of t (and t_undo), u1, u2, u3 and u1's neighbours. */
-    int rn[64], nrn = 0;
-#define ADD_NODE(n_)                                                                               \
-    do {                                                                                           \
-        int d_ = 0;                                                                                \
-        for (int k_ = 0; k_ < nrn && !d_; k_++)                                                    \
-            d_ = rn[k_] == (n_);                                                                   \
-        if (!d_ && (n_) >= 0 && nrn < 64)                                                          \
-            rn[nrn++] = (n_);                                                                      \
-    } while (0)
+    return nc;
+}
+
+static void add_node(int *rn, int *nrn, int n)
+{
+    int d = 0;
+    for (int k = 0; k < *nrn && !d; k++)
+        d = rn[k] == n;
+    if (!d && n >= 0 && *nrn < 64)
+        rn[(*nrn)++] = n;
+}
+
+/* The region scored: the nodes of t (and of the tet after an undo), u1, u2, u3 and u1's
+ * neighbours, at most 64 (rn). Returns the count. */
+static int tip_region(const NsMesh *m, const NsRemeshTip *tip, int t, const int undo_nodes[4],
+                      int *rn)
+{
+    int nrn = 0, u1 = tip->u1, u2 = tip->u2, u3 = tip->u3;
     for (int k = 0; k < 4; k++) {
-        ADD_NODE(m->tet_node[4 * t + k]);
-        ADD_NODE(undo_nodes[k]);
+        add_node(rn, &nrn, m->tet_node[4 * t + k]);
+        add_node(rn, &nrn, undo_nodes[k]);
     }
-    ADD_NODE(u1);
-    ADD_NODE(u2);
-    ADD_NODE(u3);
+    add_node(rn, &nrn, u1);
+    add_node(rn, &nrn, u2);
+    add_node(rn, &nrn, u3);
     const NsIntList *l1 = &m->node_tets[u1];
     for (int i = 0; i < l1->count; i++)
         for (int k = 0; k < 4; k++)
-            ADD_NODE(m->tet_node[4 * l1->items[i] + k]);
-    double *qbest = malloc(4 * REGION_CAP * sizeof *qbest);
-    if (!qbest) {
-        snprintf(err, (size_t)err_sz, "remesh: out of memory");
-        return -1;
-    }
-    double *qcur = qbest + 2 * REGION_CAP;
+            add_node(rn, &nrn, m->tet_node[4 * l1->items[i] + k]);
+    return nrn;
+}
+
+/* Scores every candidate that keeps the needle's chain: applied, checked (the chain joined,
+ * the boundary kept unless allowed, no tet inverted), its region's quality vector taken, and
+ * reverted. The best ranks first by the region's worst dihedral angle clipped at the floor
+ * (ours), then by the paper's lexicographic quality vector. qbest, qcur: (4 REGION_CAP)
+ * scratch; qbest holds the best's vector. Counts res->candidates. Returns the best, or -1. */
+static int best_candidate(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip,
+                          const Candidate *cand, int nc, const int *rn, int nrn,
+                          const double u_new[3], double *qbest, double *qcur, NsRemeshResult *res)
+{
     int best = -1, nbest = 0;
     double dbest = 0.0, floor_deg = tip->dihedral_floor_deg;
+    int u1 = tip->u1, u2 = tip->u2;
     for (int i = 0; i < nc; i++) {
         const Candidate *c = &cand[i];
         if (breaks_chain(tip, c))
@@ -953,6 +961,68 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
         }
         revert(m, s, &ap);
     }
+    return best;
+}
+
+/* The repair (sim/remesh_repair.c) after the chosen operation: the free nodes of the region's
+ * tets below the floor (angles too small, or too large) move, where one is 1.5 deg or more
+ * below it. The needle's nodes stay: the chain as it was, the placed node and the one slid
+ * along the needle. qcur: (4 REGION_CAP) scratch. Returns 0, or -1 (memory). */
+static int repair_region(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Applied *ap,
+                         const int *rn, int nrn, double *qcur, NsRemeshResult *res, char *err,
+                         int err_sz)
+{
+    double floor_deg = tip->dihedral_floor_deg;
+    if (!(floor_deg > 0.0))
+        return 0;
+    int *pin = malloc((size_t)(tip->chain_len + 2) * sizeof *pin);
+    if (!pin) {
+        snprintf(err, (size_t)err_sz, "remesh: out of memory for the repair");
+        return -1;
+    }
+    int np = 0;
+    for (int i = 0; i < tip->chain_len; i++)
+        pin[np++] = tip->chain[i];
+    pin[np++] = ap->placed;
+    if (ap->moved.n >= 0)
+        pin[np++] = ap->moved.n;
+    int rn2[65];
+    memcpy(rn2, rn, (size_t)nrn * sizeof *rn2);
+    rn2[nrn] = ap->placed;
+    int nq = region_quality(m, rn2, nrn + 1, qcur, REGION_CAP);
+    res->repaired =
+        ns_remesh_repair(m, s, (const int *)(qcur + REGION_CAP), nq, pin, np, floor_deg);
+    free(pin);
+    return 0;
+}
+
+int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_new[3],
+                  NsRemeshResult *res, char *err, int err_sz)
+{
+    memset(res, 0, sizeof *res);
+    int u1 = tip->u1;
+    if (!ns_mesh_node_alive(m, u1) || !ns_mesh_node_alive(m, tip->u2)) {
+        snprintf(err, (size_t)err_sz, "remesh: the needle's tip nodes are not alive");
+        return -1;
+    }
+    int t = ns_mesh_locate(m, u_new, tip->hint_tet, 1e-9, NULL);
+    if (t < 0) {
+        snprintf(err, (size_t)err_sz, "remesh: the tip (%.4g, %.4g, %.4g) m is outside the tissue",
+                 u_new[0], u_new[1], u_new[2]);
+        return -1;
+    }
+    int top_made_u1 = s->count > 0 && s->ops[s->count - 1].node == u1;
+    Candidate cand[64];
+    int undo_nodes[4] = {-1, -1, -1, -1};
+    int nc = tip_candidates(m, s, tip, t, u_new, top_made_u1, cand, undo_nodes);
+    int rn[64], nrn = tip_region(m, tip, t, undo_nodes, rn);
+    double *qbest = malloc(4 * REGION_CAP * sizeof *qbest);
+    if (!qbest) {
+        snprintf(err, (size_t)err_sz, "remesh: out of memory");
+        return -1;
+    }
+    double *qcur = qbest + 2 * REGION_CAP;
+    int best = best_candidate(m, s, tip, cand, nc, rn, nrn, u_new, qbest, qcur, res);
     if (best < 0) {
         free(qbest);
         snprintf(err, (size_t)err_sz,
@@ -979,30 +1049,9 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             node_restore(m, &now);
         }
     }
-    if (floor_deg > 0.0) {
-        /* The repair moves the free nodes of the region's tets below the floor (angles too
-         * small, or too large), where one is 1.5 deg or more below it (sim/remesh_repair.c). The
-         * needle's nodes stay: the chain as it was, the placed node and the one slid along the
-         * needle. */
-        int *pin = malloc((size_t)(tip->chain_len + 2) * sizeof *pin);
-        if (!pin) {
-            free(qbest);
-            snprintf(err, (size_t)err_sz, "remesh: out of memory for the repair");
-            return -1;
-        }
-        int np = 0;
-        for (int i = 0; i < tip->chain_len; i++)
-            pin[np++] = tip->chain[i];
-        pin[np++] = ap.placed;
-        if (ap.moved.n >= 0)
-            pin[np++] = ap.moved.n;
-        int rn2[65];
-        memcpy(rn2, rn, (size_t)nrn * sizeof *rn2);
-        rn2[nrn] = ap.placed;
-        int nq = region_quality(m, rn2, nrn + 1, qcur, REGION_CAP);
-        res->repaired =
-            ns_remesh_repair(m, s, (const int *)(qcur + REGION_CAP), nq, pin, np, floor_deg);
-        free(pin);
+    if (repair_region(m, s, tip, &ap, rn, nrn, qcur, res, err, err_sz)) {
+        free(qbest);
+        return -1;
     }
     res->kind = c->kind == NS_REMESH_SNAP ? NS_REMESH_SNAP : (NsRemeshKind)c->kind;
     res->undone = c->undo;
