@@ -118,11 +118,11 @@ int coupled_bevel_load(NsCoupled *c, const double *ext_tissue, const double *ext
     if (!(f != 0.0) || !(wsum > 0.0))
         return 0;
     size_t nt = 3 * (size_t)M->node_slots, nr = 3 * (size_t)n;
-    *et = calloc(nt, sizeof **et);
-    *er = calloc(nr, sizeof **er);
+    *et = ns_arena_push_zero(&c->arena, nt * sizeof **et);
+    *er = ns_arena_push_zero(&c->arena, nr * sizeof **er);
     if (!*et || !*er) {
-        free(*et);
-        free(*er);
+        ns_arena_pop(&c->arena, *er);
+        ns_arena_pop(&c->arena, *et);
         *et = *er = NULL;
         return -1;
     }
@@ -161,7 +161,7 @@ static double free_dot(const double *x, const double *y, const uint8_t *fixed, i
 int coupled_scale_start(CoupledSystem *S)
 {
     int n = S->nr3;
-    double *w = malloc(((size_t)S->nt3 + 4 * (size_t)n + 1) * sizeof *w);
+    double *w = ns_arena_push(S->arena, ((size_t)S->nt3 + 4 * (size_t)n + 1) * sizeof *w);
     if (!w)
         return -1;
     double *Ad = w, *d = w + S->nt3, *h = d + n, *Ah = h + n, *Adn = Ah + n;
@@ -189,7 +189,7 @@ int coupled_scale_start(CoupledSystem *S)
     for (int i = 0; i < n; i++)
         if (!S->rfixed[i])
             S->ar[i] *= alpha;
-    free(w);
+    ns_arena_pop(S->arena, w);
     return 0;
 }
 
@@ -295,6 +295,7 @@ void coupled_assemble(NsCoupled *c, double dt, NsRodSystem *sys, double *bt, dou
     NsMesh *M = &T->mesh;
     memset(S, 0, sizeof *S);
     S->c = c;
+    S->arena = &c->arena;
     S->nt3 = 3 * M->node_slots;
     S->nr3 = sys->n3;
     S->bdt2 = T->params.beta * dt * dt;

@@ -132,7 +132,7 @@ static double cg_pass(CgPass op, CgVecs *v, int n, int cut, int nth)
 static int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterations)
 {
     int n = S->nt3 + S->nr3 + 3 * S->q;
-    double *buf = malloc((size_t)n * 8 * sizeof *buf);
+    double *buf = ns_arena_push(S->arena, (size_t)n * 8 * sizeof *buf);
     if (!buf)
         return -1;
     double *x = buf, *b = x + n, *r = b + n, *p = r + n, *qv = p + n, *sc = qv + n, *tmp = sc + n;
@@ -229,7 +229,7 @@ static int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *
         for (int col = 0; col < 3; col++)
             S->cf[3 * k + col] =
                 col_active(S->st[k], col) ? xc[3 * k + col] : coupled_known_force(S, k, S->st[k]);
-    free(buf);
+    ns_arena_pop(S->arena, buf);
     return 0;
 }
 
@@ -238,9 +238,12 @@ static int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *
 int coupled_paper_lcp(CoupledSystem *S, NsCouplingStats *st)
 {
     const NsCouplingParams *p = &S->c->params;
-    TriedSet T = {0, 0, S->q, NULL};
-    uint8_t *next = malloc((size_t)(S->q > 0 ? S->q : 1));
-    int rc = next ? 0 : -1;
+    size_t qb = (size_t)(S->q > 0 ? S->q : 1);
+    uint8_t *next = ns_arena_push(S->arena, qb);
+    uint8_t *cfg = ns_arena_push(S->arena, qb * (size_t)p->max_trials);
+    TriedSet T;
+    tried_init(&T, S->q, cfg, p->max_trials);
+    int rc = next && cfg ? 0 : -1;
     st->consistent = 0;
     for (int trial = 0; trial < p->max_trials && rc == 0; trial++) {
         if (tried_add(&T, S->st)) {
@@ -270,7 +273,8 @@ int coupled_paper_lcp(CoupledSystem *S, NsCouplingStats *st)
         st->consistent = rc == 0 && coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0;
     }
     st->unconverged = rc == 0 && !S->converged;
-    free(next);
-    free(T.cfg);
+    tried_free(&T);
+    ns_arena_pop(S->arena, cfg);
+    ns_arena_pop(S->arena, next);
     return rc;
 }

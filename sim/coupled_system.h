@@ -6,6 +6,7 @@
 
 #include <stdint.h>
 
+#include "arena.h"
 #include "banded.h"
 #include "sparse.h"
 
@@ -13,18 +14,19 @@ typedef struct NsCoupled NsCoupled;
 
 typedef struct CoupledSystem {
     NsCoupled *c;
-    int nt3, nr3; /* tissue (3 node_slots) and needle (3 cap) vector lengths */
-    int q;        /* coupling nodes */
-    int *idx;     /* (q) needle node of coupling node k */
-    int *ta, *tb; /* (q) tissue point: (1 - tw) x[ta] + tw x[tb] */
-    double *tw;   /* (q) */
-    double *R;    /* (q x 9) local frame, columns t, n1, n2: R[9k + 3 col + i] */
-    double *f;    /* (q) friction threshold / dynamic magnitude [N] */
-    double f_cut; /* cutting force at the tip [N] */
-    int tip;      /* coupling index of the tip if it is inside the tissue (can cut), else -1 */
-    double *e;    /* (3q) local constraint right-hand sides [m/s^2] */
-    double *yrel; /* (3q) world: tissue minus needle known displacement part of the step [m] */
-    double bdt2;  /* beta dt^2 */
+    NsArena *arena; /* the step's scratch: blocks pushed are popped before returning */
+    int nt3, nr3;   /* tissue (3 node_slots) and needle (3 cap) vector lengths */
+    int q;          /* coupling nodes */
+    int *idx;       /* (q) needle node of coupling node k */
+    int *ta, *tb;   /* (q) tissue point: (1 - tw) x[ta] + tw x[tb] */
+    double *tw;     /* (q) */
+    double *R;      /* (q x 9) local frame, columns t, n1, n2: R[9k + 3 col + i] */
+    double *f;      /* (q) friction threshold / dynamic magnitude [N] */
+    double f_cut;   /* cutting force at the tip [N] */
+    int tip;        /* coupling index of the tip if it is inside the tissue (can cut), else -1 */
+    double *e;      /* (3q) local constraint right-hand sides [m/s^2] */
+    double *yrel;   /* (3q) world: tissue minus needle known displacement part of the step [m] */
+    double bdt2;    /* beta dt^2 */
     const NsBlockMatrix *At;
     const uint8_t *tfixed;
     double *bt; /* tissue right-hand side (nt3) */

@@ -232,7 +232,7 @@ void ns_coupled_free(NsCoupled *c)
     free(c->tb);
     free(c->tw);
     free(c->state);
-    free(c->work);
+    ns_arena_free(&c->arena);
     coupled_schur_destroy(c->schur);
     ns_remesh_stack_free(&c->remesh);
     memset(c, 0, sizeof *c);

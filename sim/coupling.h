@@ -41,6 +41,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "arena.h"
 #include "friction.h"
 #include "needle_path.h"
 #include "remesh.h"
@@ -163,8 +164,7 @@ typedef struct NsCoupled {
     int *ta, *tb;
     double *tw;
     uint8_t *state;
-    double *work; /* scratch */
-    size_t work_cap;
+    NsArena arena;              /* the step's scratch (sim/arena.h), empty between steps */
     struct CoupledSchur *schur; /* our solver's state between steps (NS_COUPLED_SCHUR) */
     NsRemeshStack remesh;       /* params.remesh: the undo stack of the tip's splits */
     int remesh_hint;            /* a tet near the tip, where point location starts */

@@ -17,8 +17,8 @@ void coupled_tissue_point(const NsCoupled *c, int i, const double *v, double *ou
 
 /* coupled_assemble.c: the coupled system of one step (Eq. 7-8, §3.3). */
 /* Our bevel model (NS_BEVEL_FORCE): *f_out the lateral force on the tip [N] (0: none); *et,
- * *er the caller's external loads copied with it added, to be freed (NULL: no force). 0, or -1
- * (memory). */
+ * *er the caller's external loads copied with it added, pushed in that order on c->arena (NULL:
+ * no force). 0, or -1 (memory). */
 int coupled_bevel_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
                        double **et, double **er);
 int coupled_count(const NsCoupled *c); /* coupling nodes now */

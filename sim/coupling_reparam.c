@@ -207,11 +207,11 @@ int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st)
     Polyline L;
     L.nb = ns_needle_path_behind(p);
     int m_cap = n + p->count + 2;
-    double *buf = malloc((size_t)m_cap * 8 * sizeof *buf);
-    uint8_t *cst = malloc((size_t)m_cap);
+    double *buf = ns_arena_push(&c->arena, (size_t)m_cap * 8 * sizeof *buf);
+    uint8_t *cst = ns_arena_push(&c->arena, (size_t)m_cap);
     if (!buf || !cst) {
-        free(buf);
-        free(cst);
+        ns_arena_pop(&c->arena, cst);
+        ns_arena_pop(&c->arena, buf);
         return -1;
     }
     L.xn = buf;
@@ -219,7 +219,7 @@ int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st)
     L.dold = L.s + m_cap;
     new_polyline(c, first, last, &L);
     int rc = resample_needle(c, st, first, last, &L, cst);
-    free(buf);
-    free(cst);
+    ns_arena_pop(&c->arena, cst);
+    ns_arena_pop(&c->arena, buf);
     return rc;
 }

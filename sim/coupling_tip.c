@@ -596,7 +596,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
         p->s = sv;
         c->path_cap = cap;
     }
-    int *chain = malloc((size_t)(len + m.K + 2) * sizeof *chain);
+    int *chain = ns_arena_push(&c->arena, (size_t)(len + m.K + 2) * sizeof *chain);
     if (!chain)
         return -1;
     for (int k = 0; k < len; k++)
@@ -605,7 +605,7 @@ static int remesh_tip(NsCoupled *c, NsCouplingStats *st)
     rc = cut_pieces(c, st, &m, chain, &len, &res);
     if (rc == 0)
         rc = commit_path(c, st, &m, chain, len, &res);
-    free(chain);
+    ns_arena_pop(&c->arena, chain);
     return rc;
 }
 

@@ -74,15 +74,37 @@ int coupled_check(const CoupledSystem *S, const uint8_t *st, const double *cf, c
     return bad;
 }
 
+void tried_init(TriedSet *T, int q, uint8_t *buf, int cap)
+{
+    T->count = 0;
+    T->q = q;
+    T->cfg = buf;
+    T->cap = buf ? cap : 0;
+    T->owned = 0;
+}
+
+void tried_free(TriedSet *T)
+{
+    if (T->owned)
+        free(T->cfg);
+    tried_init(T, T->q, NULL, 0);
+}
+
 int tried_add(TriedSet *T, const uint8_t *st)
 {
     if (T->count == T->cap) {
         int cap = T->cap ? 2 * T->cap : 16;
-        uint8_t *p = realloc(T->cfg, (size_t)cap * (size_t)(T->q > 0 ? T->q : 1));
+        size_t q = (size_t)(T->q > 0 ? T->q : 1);
+        uint8_t *p = malloc((size_t)cap * q);
         if (!p)
             return -1;
+        if (T->count)
+            memcpy(p, T->cfg, (size_t)T->count * q);
+        if (T->owned)
+            free(T->cfg);
         T->cfg = p;
         T->cap = cap;
+        T->owned = 1;
     }
     memcpy(T->cfg + (size_t)T->count * (size_t)T->q, st, (size_t)T->q);
     T->count++;

@@ -36,7 +36,11 @@ int coupled_check_slides(const CoupledSystem *S, const uint8_t *st, const double
 typedef struct TriedSet {
     int count, cap, q;
     uint8_t *cfg;
+    int owned; /* cfg was allocated here (it outgrew the caller's buffer) */
 } TriedSet;
+/* Empty, in the caller's buffer of cap configurations (buf may be NULL, cap 0). */
+void tried_init(TriedSet *T, int q, uint8_t *buf, int cap);
+void tried_free(TriedSet *T);
 int tried_add(TriedSet *T, const uint8_t *st);
 /* Makes st untried: unchanged if new, else the next configurations in lexicographic order
  * (coupling node 0, the entry, least significant). */

@@ -3,6 +3,7 @@
 #include "step.h"
 #include "coupling_internal.h"
 
+#include <assert.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -28,8 +29,7 @@ typedef struct Step {
     NsTissueStats ts;
     double *bt; /* the tissue's right-hand side, then its accelerations (ns_tissue_begin_step) */
     CoupledSystem S;
-    int *iw;
-    uint8_t *sw;
+    int mark;    /* the arena's depth at the step's start (0) */
     int begun;   /* the needle's step began: a failure before the update undoes it */
     int updated; /* the Newmark update is applied */
 } Step;
@@ -98,34 +98,23 @@ static int tissue_forces(Step *s)
 {
     const double *ext = s->bev_t ? s->bev_t : s->ctl->ext_tissue;
     s->bt = ns_tissue_begin_step(s->c->tissue, s->dt, ext, &s->ts);
-    free(s->bev_t);
-    free(s->bev_r);
+    ns_arena_pop(&s->c->arena, s->bev_r);
+    ns_arena_pop(&s->c->arena, s->bev_t);
     s->bev_t = s->bev_r = NULL;
     return s->bt ? 0 : fail(s, "out of memory assembling the tissue matrix");
-}
-
-static double *scratch(NsCoupled *c, size_t n)
-{
-    if (n > c->work_cap) {
-        double *w = realloc(c->work, n * sizeof *w);
-        if (!w)
-            return NULL;
-        c->work = w;
-        c->work_cap = n;
-    }
-    return c->work;
 }
 
 /* 2. The coupled system (Eq. 7-8, viscous friction §3.3) and the solvers' start. */
 static int assemble(Step *s)
 {
+    NsArena *a = &s->c->arena;
     int q = coupled_count(s->c);
-    double *w = scratch(s->c, coupled_system_doubles(q));
-    s->iw = malloc(coupled_system_ints(q) * sizeof *s->iw);
-    s->sw = malloc((size_t)q + 1);
-    if (!w || !s->iw || !s->sw)
+    double *w = ns_arena_push(a, coupled_system_doubles(q) * sizeof *w);
+    int *iw = ns_arena_push(a, coupled_system_ints(q) * sizeof *iw);
+    uint8_t *sw = ns_arena_push(a, (size_t)q + 1);
+    if (!w || !iw || !sw)
         return fail(s, "out of memory");
-    coupled_assemble(s->c, s->dt, &s->sys, s->bt, w, s->iw, s->sw, &s->S);
+    coupled_assemble(s->c, s->dt, &s->sys, s->bt, w, iw, sw, &s->S);
     if (coupled_scale_start(&s->S))
         return fail(s, "out of memory");
     coupled_known_forces(&s->S);
@@ -196,7 +185,8 @@ static int timed(int (*stage)(Step *), Step *s, double *ms)
     return rc;
 }
 
-/* The step's end: a failure before the update undoes the needle's step; scratch released;
+/* The step's end: a failure before the update undoes the needle's step; the arena emptied
+ * (and grown to this step's peak, so the next step allocates nothing);
  * the controls' insertion speed left on the needle; the statistics reported. */
 static int step_end(Step *s, int rc, int stall, double t0, NsCouplingStats *stats)
 {
@@ -205,10 +195,11 @@ static int step_end(Step *s, int rc, int stall, double t0, NsCouplingStats *stat
         ns_rod_abort_step(c->rod);
     if (rc && s->updated && !c->error[0])
         snprintf(c->error, sizeof c->error, "the needle's reparameterization failed");
-    free(s->bev_t);
-    free(s->bev_r);
-    free(s->iw);
-    free(s->sw);
+    /* The step's own blocks (the system's arrays, the bevel's loads after a failure) go; every
+     * stage popped its own. */
+    ns_arena_reset(&c->arena, s->mark);
+    assert(ns_arena_mark(&c->arena) == 0);
+    ns_arena_grow(&c->arena);
     if (rc == 0) {
         /* Inverted tets are counted at the next force evaluation; report the last one's. */
         s->st.inverted = s->ts.inverted;
@@ -230,6 +221,7 @@ int ns_step(NsCoupled *c, const NsStepControls *ctl, double dt, NsCouplingStats 
     s.c = c;
     s.ctl = ctl;
     s.dt = dt;
+    s.mark = ns_arena_mark(&c->arena);
     c->error[0] = '\0';
     int stall = controls_in(c, ctl);
     int rc = bevel_load(&s);

@@ -26,7 +26,7 @@
  *     path, ta, tb, tw, state (the coupling and friction states), remesh (the undo stack),
  *     remesh_hint, outside, heading, heading_valid, tip_blocked, pinned_node, steps.
  *   caches and scratch (results do not depend on them): schur (the stale factor and its
- *     columns), work (the step's scratch), cap, path_cap, error.
+ *     columns), arena (the step's scratch, empty between steps), cap, path_cap, error.
  * The one exception to a read-only model is remeshing (stage 4): it changes the tissue mesh's
  * topology, and with it the tissue's per-node arrays (ns_tissue_sync_topology), as an explicit
  * stage of the step. */
