@@ -24,6 +24,7 @@
 #include "remesh.h"
 #include "rod.h"
 #include "run.h"
+#include "step.h"
 
 const char *const ns_run_event_names[2] = {"bone_contact", "tip_exit"};
 
@@ -452,21 +453,19 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
         ns_control_log_write_row(r->rec, t, &ctl);
     if (ctl.next_needle && ns_run_next_needle(r, &ctl.entry, t, err, err_sz))
         return -1;
-    r->rod.v_insert = ctl.v_insert;
-    memcpy(r->rod.v_base, ctl.v_base, sizeof ctl.v_base);
-    r->rod.twist_rate = ctl.twist_rate;
+    NsStepControls step_ctl = ns_step_controls(ctl.v_insert, ctl.v_base, ctl.twist_rate);
     if (ctl.drop_seed && ns_run_release_seed(r, t, err, err_sz))
         return -1;
-    if (r->rod.v_insert > 0.0 && r->prev_v <= 0.0)
+    if (ctl.v_insert > 0.0 && r->prev_v <= 0.0)
         r->insertions++;
-    r->prev_v = r->rod.v_insert;
+    r->prev_v = ctl.v_insert;
     if (r->rendering && ns_run_render_before_step(r)) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
     NsCouplingStats st;
     double w0 = ns_wall_s();
-    int rc = ns_coupled_step(&r->c, sp->dt, NULL, NULL, &st);
+    int rc = ns_step(&r->c, &step_ctl, sp->dt, &st);
     double w = 1e3 * (ns_wall_s() - w0);
     r->nan += st.nan_count;
     if (rc) {

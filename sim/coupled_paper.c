@@ -127,10 +127,12 @@ static double cg_pass(CgPass op, CgVecs *v, int n, int cut, int nth)
     return sums[0];
 }
 
-int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterations)
+/* The linear solve: for the states S->st, to relative residual tol, warm-started from at, ar,
+ * cf. Returns 0 or -1; adds its iterations. */
+static int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterations)
 {
     int n = S->nt3 + S->nr3 + 3 * S->q;
-    double *buf = malloc((size_t)n * 8 * sizeof *buf);
+    double *buf = ns_arena_push(S->arena, (size_t)n * 8 * sizeof *buf);
     if (!buf)
         return -1;
     double *x = buf, *b = x + n, *r = b + n, *p = r + n, *qv = p + n, *sc = qv + n, *tmp = sc + n;
@@ -227,6 +229,52 @@ int coupled_paper_solve(CoupledSystem *S, double tol, int max_iter, int *iterati
         for (int col = 0; col < 3; col++)
             S->cf[3 * k + col] =
                 col_active(S->st[k], col) ? xc[3 * k + col] : coupled_known_force(S, k, S->st[k]);
-    free(buf);
+    ns_arena_pop(S->arena, buf);
     return 0;
+}
+
+/* Algorithm 3 with the paper's solver: CG on Eq. 7 per trial, warm-started from the previous
+ * trial, checked at tau_check, finished to tau_sol. */
+int coupled_paper_lcp(CoupledSystem *S, NsCouplingStats *st)
+{
+    const NsCouplingParams *p = &S->c->params;
+    size_t qb = (size_t)(S->q > 0 ? S->q : 1);
+    uint8_t *next = ns_arena_push(S->arena, qb);
+    uint8_t *cfg = ns_arena_push(S->arena, qb * (size_t)p->max_trials);
+    TriedSet T;
+    tried_init(&T, S->q, cfg, p->max_trials);
+    int rc = next && cfg ? 0 : -1;
+    st->consistent = 0;
+    for (int trial = 0; trial < p->max_trials && rc == 0; trial++) {
+        if (tried_add(&T, S->st)) {
+            rc = -1;
+            break;
+        }
+        st->trials++;
+        if (coupled_paper_solve(S, p->tau_check, p->max_iter, &st->iterations)) {
+            rc = -1;
+            break;
+        }
+        if (coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0) {
+            if (coupled_paper_solve(S, p->tau_sol, p->max_iter, &st->iterations)) {
+                rc = -1;
+                break;
+            }
+            if (coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0) {
+                st->consistent = 1;
+                break;
+            }
+        }
+        memcpy(S->st, next, (size_t)S->q);
+        tried_next(&T, S->st);
+    }
+    if (rc == 0 && !st->consistent) { /* accept the last configuration (§3.6.1) */
+        rc = coupled_paper_solve(S, p->tau_sol, p->max_iter, &st->iterations);
+        st->consistent = rc == 0 && coupled_check(S, S->st, S->cf, S->at, S->ar, next) == 0;
+    }
+    st->unconverged = rc == 0 && !S->converged;
+    tried_free(&T);
+    ns_arena_pop(S->arena, cfg);
+    ns_arena_pop(S->arena, next);
+    return rc;
 }

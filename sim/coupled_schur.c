@@ -1298,11 +1298,13 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
     if (ensure_buf(w, S))
         return -1;
     double *c1 = w->small + 4 * (size_t)q3, *h1 = c1 + q3, *dc = h1 + q3, *c2 = dc + q3;
-    double *h2 = malloc((size_t)(2 * q3 + q + S->nr3 + 1) * sizeof *h2);
-    uint8_t *next = malloc((size_t)q + 1);
-    if (!h2 || !next) {
-        free(h2);
-        free(next);
+    double *h2 = ns_arena_push(S->arena, (size_t)(2 * q3 + q + S->nr3 + 1) * sizeof *h2);
+    uint8_t *next = ns_arena_push(S->arena, (size_t)q + 1);
+    uint8_t *cfg = ns_arena_push(S->arena, (size_t)(q > 0 ? q : 1) * (size_t)prm->max_trials);
+    if (!h2 || !next || !cfg) {
+        ns_arena_pop(S->arena, cfg);
+        ns_arena_pop(S->arena, next);
+        ns_arena_pop(S->arena, h2);
         return -1;
     }
     double *slide = h2 + q3, *ptmp = slide + q, *nscratch = ptmp + q3;
@@ -1329,7 +1331,8 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
         rc = -1;
     if (rc == 0 && prepare(w, S, nscratch))
         rc = -1;
-    TriedSet T = {0, 0, q, NULL};
+    TriedSet T;
+    tried_init(&T, q, cfg, prm->max_trials);
     int have_base = 0;
     st->consistent = 0;
     for (int trial = 0; trial < prm->max_trials && rc == 0; trial++) {
@@ -1381,8 +1384,9 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
         w->refresh = 0;
         w->refresh_now = schedule_refresh(w, S) != 0;
     }
-    free(T.cfg);
-    free(h2);
-    free(next);
+    tried_free(&T);
+    ns_arena_pop(S->arena, cfg);
+    ns_arena_pop(S->arena, next);
+    ns_arena_pop(S->arena, h2);
     return rc;
 }

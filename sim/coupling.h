@@ -41,18 +41,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "arena.h"
+#include "friction.h"
 #include "needle_path.h"
 #include "remesh.h"
 #include "rod.h"
 #include "solver.h"
 #include "tissue.h"
-
-typedef enum NsFriction {
-    NS_FRICTION_FREE = 0,
-    NS_FRICTION_STATIC = 1,
-    NS_FRICTION_DYN_NEG = 2, /* the needle slides backward (out of the tissue) */
-    NS_FRICTION_DYN_POS = 3, /* the needle slides forward (towards its tip) */
-} NsFriction;
 
 typedef enum NsCoupledSolverKind {
     NS_COUPLED_SCHUR = 0, /* ours, the default: stale factor, dense compliance, projected PCG */
@@ -169,8 +164,7 @@ typedef struct NsCoupled {
     int *ta, *tb;
     double *tw;
     uint8_t *state;
-    double *work; /* scratch */
-    size_t work_cap;
+    NsArena arena;              /* the step's scratch (sim/arena.h), empty between steps */
     struct CoupledSchur *schur; /* our solver's state between steps (NS_COUPLED_SCHUR) */
     NsRemeshStack remesh;       /* params.remesh: the undo stack of the tip's splits */
     int remesh_hint;            /* a tet near the tip, where point location starts */

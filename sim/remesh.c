@@ -1,6 +1,6 @@
-/* Tissue remeshing at the needle tip (sim/remesh.h): point location, the snap and split
- * operations with their undo stack, and Algorithm 2's choice among candidate operations by the
- * lexicographic quality vector (paper §3.4.1). */
+/* Tissue remeshing at the needle tip (sim/remesh.h): point location, and Algorithm 2's choice
+ * among candidate operations by the lexicographic quality vector (paper §3.4.1). The snap and
+ * split operations with their undo stack are remesh_stack.c. */
 #include "remesh.h"
 
 #include <math.h>
@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "quality.h"
+#include "remesh_internal.h"
 
 /* ---- geometry ---- */
 
@@ -92,7 +93,7 @@ int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int s
 }
 
 /* World state (x, v, a) at barycentric b of tet t. */
-static void interp_state(const NsMesh *m, int t, const double b[4], double x[3], double v[3],
+void remesh_interp_state(const NsMesh *m, int t, const double b[4], double x[3], double v[3],
                          double a[3])
 {
     for (int i = 0; i < 3; i++)
@@ -107,7 +108,7 @@ static void interp_state(const NsMesh *m, int t, const double b[4], double x[3],
     }
 }
 
-static int tet_has(const NsMesh *m, int t, int n)
+int remesh_tet_has(const NsMesh *m, int t, int n)
 {
     const int *tn = m->tet_node + 4 * t;
     return tn[0] == n || tn[1] == n || tn[2] == n || tn[3] == n;
@@ -145,261 +146,8 @@ int ns_remesh_joined(const NsMesh *m, int a, int b)
         return 1;
     const NsIntList *l = &m->node_tets[a];
     for (int i = 0; i < l->count; i++)
-        if (tet_has(m, l->items[i], b))
+        if (remesh_tet_has(m, l->items[i], b))
             return 1;
-    return 0;
-}
-
-/* ---- the stack and the operations ---- */
-
-void ns_remesh_stack_init(NsRemeshStack *s)
-{
-    memset(s, 0, sizeof *s);
-}
-
-void ns_remesh_stack_free(NsRemeshStack *s)
-{
-    for (int i = 0; i < s->count; i++) {
-        free(s->ops[i].removed_tet);
-        free(s->ops[i].added_tet);
-    }
-    free(s->ops);
-    free(s->snap_node);
-    free(s->snap_u);
-    memset(s, 0, sizeof *s);
-}
-
-/* Tets containing every node of the simplex, into out (cap); returns their count. */
-static int simplex_tets(const NsMesh *m, const int *simplex, int k, int *out, int cap)
-{
-    int n = 0;
-    const NsIntList *l = &m->node_tets[simplex[0]];
-    for (int i = 0; i < l->count; i++) {
-        int t = l->items[i], all = 1;
-        for (int j = 1; j < k && all; j++)
-            all = tet_has(m, t, simplex[j]);
-        if (all && n < cap)
-            out[n++] = t;
-    }
-    return n;
-}
-
-#define MAX_RING 128
-
-int ns_remesh_split(NsMesh *m, NsRemeshStack *s, const int *simplex, int k, const double u[3])
-{
-    if (k < 2 || k > 4)
-        return -1;
-    for (int j = 0; j < k; j++)
-        if (!ns_mesh_node_alive(m, simplex[j]))
-            return -1;
-    int tets[MAX_RING];
-    int nt = simplex_tets(m, simplex, k, tets, MAX_RING);
-    if (nt == 0 || nt == MAX_RING)
-        return -1;
-    /* Every created tet must be positive in material space. */
-    for (int i = 0; i < nt; i++)
-        for (int j = 0; j < k; j++) {
-            const double *p[4];
-            for (int c = 0; c < 4; c++) {
-                int n = m->tet_node[4 * tets[i] + c];
-                p[c] = n == simplex[j] ? u : m->u + 3 * n;
-            }
-            if (!(ns_tet_volume(p[0], p[1], p[2], p[3]) > 0.0))
-                return -1;
-        }
-    double b[4], x[3], v[3], a[3];
-    int loc = ns_mesh_locate(m, u, tets[0], 1e-9, b);
-    if (loc < 0)
-        return -1;
-    interp_state(m, loc, b, x, v, a);
-    if (s->count == s->cap) {
-        int cap = s->cap ? 2 * s->cap : 16;
-        NsRemeshOp *o = realloc(s->ops, (size_t)cap * sizeof *o);
-        if (!o)
-            return -1;
-        s->ops = o;
-        s->cap = cap;
-    }
-    NsRemeshOp *op = &s->ops[s->count];
-    memset(op, 0, sizeof *op);
-    op->removed_tet = malloc((size_t)nt * 6 * sizeof *op->removed_tet);
-    op->added_tet = malloc((size_t)nt * (size_t)k * sizeof *op->added_tet);
-    int node = op->removed_tet && op->added_tet ? ns_mesh_add_node(m, u) : -1;
-    if (node < 0) {
-        free(op->removed_tet);
-        free(op->added_tet);
-        return -1;
-    }
-    memcpy(m->x + 3 * node, x, sizeof x);
-    memcpy(m->v + 3 * node, v, sizeof v);
-    memcpy(m->a + 3 * node, a, sizeof a);
-    op->kind = (NsRemeshKind)k;
-    op->node = node;
-    memcpy(op->simplex, simplex, (size_t)k * sizeof *simplex);
-    for (int i = 0; i < nt; i++) {
-        int *r = op->removed_tet + 6 * i;
-        r[0] = tets[i];
-        r[1] = m->tet_region[tets[i]];
-        memcpy(r + 2, m->tet_node + 4 * tets[i], 4 * sizeof *r);
-        ns_mesh_remove_tet(m, tets[i]);
-    }
-    op->removed = nt;
-    for (int i = 0; i < nt; i++)
-        for (int j = 0; j < k; j++) {
-            const int *r = op->removed_tet + 6 * i;
-            int tn[4];
-            for (int c = 0; c < 4; c++)
-                tn[c] = r[2 + c] == simplex[j] ? node : r[2 + c];
-            int t = ns_mesh_add_tet(m, tn, r[1]);
-            if (t < 0) { /* memory: put back everything added so far */
-                s->count++;
-                ns_remesh_undo(m, s);
-                return -1;
-            }
-            op->added_tet[op->added++] = t;
-        }
-    s->count++;
-    return node;
-}
-
-static void forget_original(NsRemeshStack *s, int n);
-
-int ns_remesh_undo(NsMesh *m, NsRemeshStack *s)
-{
-    if (s->count == 0)
-        return -1;
-    NsRemeshOp *op = &s->ops[s->count - 1];
-    if (m->node_tets[op->node].count != op->added)
-        return -1; /* the node is used by tets the operation did not make: nothing changed */
-    for (int i = op->added - 1; i >= 0; i--)
-        ns_mesh_remove_tet(m, op->added_tet[i]);
-    for (int i = op->removed - 1; i >= 0; i--) {
-        const int *r = op->removed_tet + 6 * i;
-        if (ns_mesh_add_tet(m, r + 2, r[1]) < 0)
-            return -1;
-    }
-    ns_mesh_remove_node(m, op->node);
-    forget_original(s, op->node);
-    free(op->removed_tet);
-    free(op->added_tet);
-    s->count--;
-    return 0;
-}
-
-int ns_remesh_original(const NsRemeshStack *s, int n, double u[3])
-{
-    for (int i = 0; i < s->snaps; i++)
-        if (s->snap_node[i] == n) {
-            memcpy(u, s->snap_u + 3 * i, 3 * sizeof *u);
-            return 1;
-        }
-    return 0;
-}
-
-/* Moves node n's material position to u, with world state (x, v, a) given; no checks. */
-static void set_node(NsMesh *m, int n, const double u[3], const double x[3], const double v[3],
-                     const double a[3])
-{
-    memcpy(m->u + 3 * n, u, 3 * sizeof *u);
-    memcpy(m->x + 3 * n, x, 3 * sizeof *x);
-    memcpy(m->v + 3 * n, v, 3 * sizeof *v);
-    memcpy(m->a + 3 * n, a, 3 * sizeof *a);
-}
-
-void ns_remesh_forget_original(NsRemeshStack *s, int n)
-{
-    forget_original(s, n);
-}
-
-/* Forgets node n's original position (its slot died with an undone split). */
-static void forget_original(NsRemeshStack *s, int n)
-{
-    for (int i = 0; i < s->snaps; i++)
-        if (s->snap_node[i] == n) {
-            s->snap_node[i] = s->snap_node[s->snaps - 1];
-            memcpy(s->snap_u + 3 * i, s->snap_u + 3 * (s->snaps - 1), 3 * sizeof(double));
-            s->snaps--;
-            return;
-        }
-}
-
-int ns_remesh_record_original(NsRemeshStack *s, int n, const double u[3])
-{
-    double u0[3];
-    if (ns_remesh_original(s, n, u0))
-        return 0;
-    for (int i = 0; i < s->count; i++)
-        if (s->ops[i].node == n)
-            return 0; /* made by a split: undoing it removes the node, it has no original */
-    if (s->snaps == s->snap_cap) {
-        int cap = s->snap_cap ? 2 * s->snap_cap : 16;
-        int *sn = realloc(s->snap_node, (size_t)cap * sizeof *sn);
-        if (sn)
-            s->snap_node = sn;
-        double *su = realloc(s->snap_u, (size_t)cap * 3 * sizeof *su);
-        if (su)
-            s->snap_u = su;
-        if (!sn || !su)
-            return -1;
-        s->snap_cap = cap;
-    }
-    s->snap_node[s->snaps] = n;
-    memcpy(s->snap_u + 3 * s->snaps, u, 3 * sizeof(double));
-    s->snaps++;
-    return 0;
-}
-
-void ns_remesh_release_all(NsMesh *m, NsRemeshStack *s)
-{
-    for (int i = 0; i < s->snaps; i++) {
-        int n = s->snap_node[i];
-        if (!ns_mesh_node_alive(m, n) || m->node_tets[n].count == 0)
-            continue;
-        double b[4], x[3], v[3], a[3];
-        const double *u0 = s->snap_u + 3 * i;
-        int loc = ns_mesh_locate(m, u0, m->node_tets[n].items[0], 1e-9, b);
-        if (loc >= 0) {
-            interp_state(m, loc, b, x, v, a);
-            set_node(m, n, u0, x, v, a);
-        } else {
-            memcpy(m->u + 3 * n, u0, 3 * sizeof *u0);
-        }
-    }
-    s->snaps = 0;
-}
-
-int ns_remesh_snap(NsMesh *m, NsRemeshStack *s, int n, const double u[3])
-{
-    return ns_remesh_snap_all(m, s, &n, u, 1);
-}
-
-int ns_remesh_snap_all(NsMesh *m, NsRemeshStack *s, const int *nodes, const double *u, int count)
-{
-    /* Every world state from the mesh as it is, before any node moves. */
-    double *st = malloc((size_t)(9 * count + 1) * sizeof *st);
-    if (!st)
-        return -1;
-    for (int i = 0; i < count; i++) {
-        int n = nodes[i];
-        double b[4];
-        int loc = ns_mesh_node_alive(m, n) && m->node_tets[n].count > 0
-                      ? ns_mesh_locate(m, u + 3 * i, m->node_tets[n].items[0], 1e-9, b)
-                      : -1;
-        if (loc < 0) {
-            free(st);
-            return -1;
-        }
-        interp_state(m, loc, b, st + 9 * i, st + 9 * i + 3, st + 9 * i + 6);
-    }
-    for (int i = 0; i < count; i++)
-        if (ns_remesh_record_original(s, nodes[i], m->u + 3 * nodes[i])) {
-            free(st);
-            return -1;
-        }
-    for (int i = 0; i < count; i++)
-        set_node(m, nodes[i], u + 3 * i, st + 9 * i, st + 9 * i + 3, st + 9 * i + 6);
-    free(st);
     return 0;
 }
 
@@ -441,7 +189,7 @@ static void node_save(const NsMesh *m, int n, NodeSave *s)
 static void node_restore(NsMesh *m, const NodeSave *s)
 {
     if (s->n >= 0)
-        set_node(m, s->n, s->u, s->x, s->v, s->a);
+        remesh_set_node(m, s->n, s->u, s->x, s->v, s->a);
 }
 
 /* The searches below ask of a trial position only whether node n's worst tet quality beats
@@ -590,8 +338,8 @@ static void place_free(NsMesh *m, const NsRemeshStack *s, int n, int allow_bound
     int loc = ns_mesh_locate(m, p, l->items[0], 1e-9, b);
     if (loc < 0)
         return;
-    interp_state(m, loc, b, x, v, a);
-    set_node(m, n, p, x, v, a);
+    remesh_interp_state(m, loc, b, x, v, a);
+    remesh_set_node(m, n, p, x, v, a);
 }
 
 /* Tets of a scored region at most. */
@@ -791,23 +539,16 @@ static int breaks_chain(const NsRemeshTip *tip, const Candidate *c)
     return 0;
 }
 
-int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_new[3],
-                  NsRemeshResult *res, char *err, int err_sz)
+/* Algorithm 2's candidate operations for the tip at u_new in tet t: line 2 (the tip node
+ * snaps), line 5 (penetrating: a node at u_new, u1 sliding), line 10 (retracting: u1 leaves the
+ * needle), lines 6-8 (the split that made u1 undone first: top_made_u1) and our addition for a
+ * snapped tip. undo_nodes: the tet holding u_new after that undo (-1s: none). Returns the
+ * count. */
+static int tip_candidates(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, int t,
+                          const double u_new[3], int top_made_u1, Candidate *cand,
+                          int undo_nodes[4])
 {
-    memset(res, 0, sizeof *res);
     int u1 = tip->u1, u2 = tip->u2, u3 = tip->u3;
-    if (!ns_mesh_node_alive(m, u1) || !ns_mesh_node_alive(m, u2)) {
-        snprintf(err, (size_t)err_sz, "remesh: the needle's tip nodes are not alive");
-        return -1;
-    }
-    int t = ns_mesh_locate(m, u_new, tip->hint_tet, 1e-9, NULL);
-    if (t < 0) {
-        snprintf(err, (size_t)err_sz, "remesh: the tip (%.4g, %.4g, %.4g) m is outside the tissue",
-                 u_new[0], u_new[1], u_new[2]);
-        return -1;
-    }
-    int top_made_u1 = s->count > 0 && s->ops[s->count - 1].node == u1;
-    Candidate cand[64];
     int nc = 0;
     /* Line 2: the tip node snaps to u_new. */
     cand[nc++] = (Candidate){0, NS_REMESH_SNAP, {u1, -1, -1, -1}, -1, -1, 0};
@@ -846,7 +587,7 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             cand[nc++] = c;
         }
     }
-    int t_undo = -1, undo_nodes[4] = {-1, -1, -1, -1};
+    int t_undo = -1;
     if (top_made_u1) {
         /* Lines 6-8: undo the split that made u1, then a standard operation on the tet that will
          * contain u_new, joined to (or being) u2; u2 then slides on [u_new, u3]. The tet after
@@ -863,7 +604,7 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             t_undo = ns_mesh_locate(
                 m, u_new, m->node_tets[u2].count ? m->node_tets[u2].items[0] : -1, 1e-9, NULL);
             if (t_undo >= 0)
-                memcpy(undo_nodes, m->tet_node + 4 * t_undo, sizeof undo_nodes);
+                memcpy(undo_nodes, m->tet_node + 4 * t_undo, 4 * sizeof *undo_nodes);
             Candidate su[15];
             int nsu = t_undo >= 0 ? standard_ops(m, t_undo, su) : 0;
             for (int i = 0; i < nsu && nc < 64; i++) {
@@ -877,35 +618,50 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             node_restore(m, &keep);
         }
     }
-    /* The region: nodes of t (and t_undo), u1, u2, u3 and u1's neighbours. */
-    int rn[64], nrn = 0;
-#define ADD_NODE(n_)                                                                               \
-    do {                                                                                           \
-        int d_ = 0;                                                                                \
-        for (int k_ = 0; k_ < nrn && !d_; k_++)                                                    \
-            d_ = rn[k_] == (n_);                                                                   \
-        if (!d_ && (n_) >= 0 && nrn < 64)                                                          \
-            rn[nrn++] = (n_);                                                                      \
-    } while (0)
+    return nc;
+}
+
+static void add_node(int *rn, int *nrn, int n)
+{
+    int d = 0;
+    for (int k = 0; k < *nrn && !d; k++)
+        d = rn[k] == n;
+    if (!d && n >= 0 && *nrn < 64)
+        rn[(*nrn)++] = n;
+}
+
+/* The region scored: the nodes of t (and of the tet after an undo), u1, u2, u3 and u1's
+ * neighbours, at most 64 (rn). Returns the count. */
+static int tip_region(const NsMesh *m, const NsRemeshTip *tip, int t, const int undo_nodes[4],
+                      int *rn)
+{
+    int nrn = 0, u1 = tip->u1, u2 = tip->u2, u3 = tip->u3;
     for (int k = 0; k < 4; k++) {
-        ADD_NODE(m->tet_node[4 * t + k]);
-        ADD_NODE(undo_nodes[k]);
+        add_node(rn, &nrn, m->tet_node[4 * t + k]);
+        add_node(rn, &nrn, undo_nodes[k]);
     }
-    ADD_NODE(u1);
-    ADD_NODE(u2);
-    ADD_NODE(u3);
+    add_node(rn, &nrn, u1);
+    add_node(rn, &nrn, u2);
+    add_node(rn, &nrn, u3);
     const NsIntList *l1 = &m->node_tets[u1];
     for (int i = 0; i < l1->count; i++)
         for (int k = 0; k < 4; k++)
-            ADD_NODE(m->tet_node[4 * l1->items[i] + k]);
-    double *qbest = malloc(4 * REGION_CAP * sizeof *qbest);
-    if (!qbest) {
-        snprintf(err, (size_t)err_sz, "remesh: out of memory");
-        return -1;
-    }
-    double *qcur = qbest + 2 * REGION_CAP;
+            add_node(rn, &nrn, m->tet_node[4 * l1->items[i] + k]);
+    return nrn;
+}
+
+/* Scores every candidate that keeps the needle's chain: applied, checked (the chain joined,
+ * the boundary kept unless allowed, no tet inverted), its region's quality vector taken, and
+ * reverted. The best ranks first by the region's worst dihedral angle clipped at the floor
+ * (ours), then by the paper's lexicographic quality vector. qbest, qcur: (4 REGION_CAP)
+ * scratch; qbest holds the best's vector. Counts res->candidates. Returns the best, or -1. */
+static int best_candidate(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip,
+                          const Candidate *cand, int nc, const int *rn, int nrn,
+                          const double u_new[3], double *qbest, double *qcur, NsRemeshResult *res)
+{
     int best = -1, nbest = 0;
     double dbest = 0.0, floor_deg = tip->dihedral_floor_deg;
+    int u1 = tip->u1, u2 = tip->u2;
     for (int i = 0; i < nc; i++) {
         const Candidate *c = &cand[i];
         if (breaks_chain(tip, c))
@@ -953,6 +709,68 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
         }
         revert(m, s, &ap);
     }
+    return best;
+}
+
+/* The repair (sim/remesh_repair.c) after the chosen operation: the free nodes of the region's
+ * tets below the floor (angles too small, or too large) move, where one is 1.5 deg or more
+ * below it. The needle's nodes stay: the chain as it was, the placed node and the one slid
+ * along the needle. qcur: (4 REGION_CAP) scratch. Returns 0, or -1 (memory). */
+static int repair_region(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Applied *ap,
+                         const int *rn, int nrn, double *qcur, NsRemeshResult *res, char *err,
+                         int err_sz)
+{
+    double floor_deg = tip->dihedral_floor_deg;
+    if (!(floor_deg > 0.0))
+        return 0;
+    int *pin = malloc((size_t)(tip->chain_len + 2) * sizeof *pin);
+    if (!pin) {
+        snprintf(err, (size_t)err_sz, "remesh: out of memory for the repair");
+        return -1;
+    }
+    int np = 0;
+    for (int i = 0; i < tip->chain_len; i++)
+        pin[np++] = tip->chain[i];
+    pin[np++] = ap->placed;
+    if (ap->moved.n >= 0)
+        pin[np++] = ap->moved.n;
+    int rn2[65];
+    memcpy(rn2, rn, (size_t)nrn * sizeof *rn2);
+    rn2[nrn] = ap->placed;
+    int nq = region_quality(m, rn2, nrn + 1, qcur, REGION_CAP);
+    res->repaired =
+        ns_remesh_repair(m, s, (const int *)(qcur + REGION_CAP), nq, pin, np, floor_deg);
+    free(pin);
+    return 0;
+}
+
+int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_new[3],
+                  NsRemeshResult *res, char *err, int err_sz)
+{
+    memset(res, 0, sizeof *res);
+    int u1 = tip->u1;
+    if (!ns_mesh_node_alive(m, u1) || !ns_mesh_node_alive(m, tip->u2)) {
+        snprintf(err, (size_t)err_sz, "remesh: the needle's tip nodes are not alive");
+        return -1;
+    }
+    int t = ns_mesh_locate(m, u_new, tip->hint_tet, 1e-9, NULL);
+    if (t < 0) {
+        snprintf(err, (size_t)err_sz, "remesh: the tip (%.4g, %.4g, %.4g) m is outside the tissue",
+                 u_new[0], u_new[1], u_new[2]);
+        return -1;
+    }
+    int top_made_u1 = s->count > 0 && s->ops[s->count - 1].node == u1;
+    Candidate cand[64];
+    int undo_nodes[4] = {-1, -1, -1, -1};
+    int nc = tip_candidates(m, s, tip, t, u_new, top_made_u1, cand, undo_nodes);
+    int rn[64], nrn = tip_region(m, tip, t, undo_nodes, rn);
+    double *qbest = malloc(4 * REGION_CAP * sizeof *qbest);
+    if (!qbest) {
+        snprintf(err, (size_t)err_sz, "remesh: out of memory");
+        return -1;
+    }
+    double *qcur = qbest + 2 * REGION_CAP;
+    int best = best_candidate(m, s, tip, cand, nc, rn, nrn, u_new, qbest, qcur, res);
     if (best < 0) {
         free(qbest);
         snprintf(err, (size_t)err_sz,
@@ -979,30 +797,9 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
             node_restore(m, &now);
         }
     }
-    if (floor_deg > 0.0) {
-        /* The repair moves the free nodes of the region's tets below the floor (angles too
-         * small, or too large), where one is 1.5 deg or more below it (sim/remesh_repair.c). The
-         * needle's nodes stay: the chain as it was, the placed node and the one slid along the
-         * needle. */
-        int *pin = malloc((size_t)(tip->chain_len + 2) * sizeof *pin);
-        if (!pin) {
-            free(qbest);
-            snprintf(err, (size_t)err_sz, "remesh: out of memory for the repair");
-            return -1;
-        }
-        int np = 0;
-        for (int i = 0; i < tip->chain_len; i++)
-            pin[np++] = tip->chain[i];
-        pin[np++] = ap.placed;
-        if (ap.moved.n >= 0)
-            pin[np++] = ap.moved.n;
-        int rn2[65];
-        memcpy(rn2, rn, (size_t)nrn * sizeof *rn2);
-        rn2[nrn] = ap.placed;
-        int nq = region_quality(m, rn2, nrn + 1, qcur, REGION_CAP);
-        res->repaired =
-            ns_remesh_repair(m, s, (const int *)(qcur + REGION_CAP), nq, pin, np, floor_deg);
-        free(pin);
+    if (repair_region(m, s, tip, &ap, rn, nrn, qcur, res, err, err_sz)) {
+        free(qbest);
+        return -1;
     }
     res->kind = c->kind == NS_REMESH_SNAP ? NS_REMESH_SNAP : (NsRemeshKind)c->kind;
     res->undone = c->undo;

@@ -430,6 +430,67 @@ static int patch_partition(NsTissue *t, int parts, int *part)
     return 0;
 }
 
+/* METIS's k-way partition of the graph of alive nodes (compacted) joined by tet edges, vertex
+ * weight = incident tets, which is what phase 1 costs per node once tets go to their nodes'
+ * part: written into part (node_slots) where METIS succeeds, left as it was elsewhere. */
+static void metis_partition(const NsMesh *M, int parts, int *part)
+{
+    int nn = M->node_slots;
+    idx_t nv = 0, ncon = 1, np = parts, cut = 0;
+    size_t adj_max = 0;
+    for (int i = 0; i < nn; i++)
+        if (M->flags[i] & NS_NODE_ALIVE) {
+            nv++;
+            adj_max += 3 * (size_t)M->node_tets[i].count;
+        }
+    idx_t *vid = malloc((size_t)(nn > 0 ? nn : 1) * sizeof *vid);
+    idx_t *xadj = malloc((size_t)(nv + 1) * sizeof *xadj);
+    idx_t *adj = malloc((adj_max > 0 ? adj_max : 1) * sizeof *adj);
+    idx_t *vwgt = malloc((size_t)(nv > 0 ? nv : 1) * sizeof *vwgt);
+    idx_t *vpart = malloc((size_t)(nv > 0 ? nv : 1) * sizeof *vpart);
+    int *seen = malloc((size_t)(nn > 0 ? nn : 1) * sizeof *seen);
+    if (vid && xadj && adj && vwgt && vpart && seen && nv > parts) {
+        idx_t v = 0;
+        for (int i = 0; i < nn; i++) {
+            vid[i] = (M->flags[i] & NS_NODE_ALIVE) ? v++ : -1;
+            seen[i] = -1;
+        }
+        idx_t k = 0;
+        v = 0;
+        for (int i = 0; i < nn; i++) {
+            if (vid[i] < 0)
+                continue;
+            const NsIntList *l = &M->node_tets[i];
+            xadj[v] = k;
+            vwgt[v] = l->count > 0 ? l->count : 1;
+            for (int q = 0; q < l->count; q++) {
+                const int *tn = M->tet_node + 4 * l->items[q];
+                for (int b = 0; b < 4; b++)
+                    if (tn[b] != i && seen[tn[b]] != i && vid[tn[b]] >= 0) {
+                        seen[tn[b]] = i;
+                        adj[k++] = vid[tn[b]];
+                    }
+            }
+            v++;
+        }
+        xadj[nv] = k;
+        idx_t opt[METIS_NOPTIONS];
+        METIS_SetDefaultOptions(opt);
+        opt[METIS_OPTION_SEED] = 1; /* the same partition every run, for stable timings */
+        if (METIS_PartGraphKway(&nv, &ncon, xadj, adj, vwgt, NULL, NULL, &np, NULL, NULL, opt, &cut,
+                                vpart) == METIS_OK)
+            for (int i = 0; i < nn; i++)
+                if (vid[i] >= 0 && vpart[vid[i]] >= 0 && vpart[vid[i]] < parts)
+                    part[i] = (int)vpart[vid[i]];
+    }
+    free(vid);
+    free(xadj);
+    free(adj);
+    free(vwgt);
+    free(vpart);
+    free(seen);
+}
+
 /* Work partition: METIS splits the node graph into one part per thread, so that a thread's tets
  * and block rows sit together and few tets straddle parts (§3.6.3). A tet goes to the part that
  * owns most of its nodes. The partition only decides who does what, for speed and locality; it
@@ -480,61 +541,7 @@ static int partition(NsTissue *t, int parts)
     if (patched) {
         t->part_metis_age++;
     } else if (parts > 1) {
-        /* The graph of alive nodes (compacted) joined by tet edges; vertex weight = incident
-         * tets, which is what phase 1 costs per node once tets go to their nodes' part. */
-        idx_t nv = 0, ncon = 1, np = parts, cut = 0;
-        size_t adj_max = 0;
-        for (int i = 0; i < nn; i++)
-            if (M->flags[i] & NS_NODE_ALIVE) {
-                nv++;
-                adj_max += 3 * (size_t)M->node_tets[i].count;
-            }
-        idx_t *vid = malloc((size_t)(nn > 0 ? nn : 1) * sizeof *vid);
-        idx_t *xadj = malloc((size_t)(nv + 1) * sizeof *xadj);
-        idx_t *adj = malloc((adj_max > 0 ? adj_max : 1) * sizeof *adj);
-        idx_t *vwgt = malloc((size_t)(nv > 0 ? nv : 1) * sizeof *vwgt);
-        idx_t *vpart = malloc((size_t)(nv > 0 ? nv : 1) * sizeof *vpart);
-        int *seen = malloc((size_t)(nn > 0 ? nn : 1) * sizeof *seen);
-        if (vid && xadj && adj && vwgt && vpart && seen && nv > parts) {
-            idx_t v = 0;
-            for (int i = 0; i < nn; i++) {
-                vid[i] = (M->flags[i] & NS_NODE_ALIVE) ? v++ : -1;
-                seen[i] = -1;
-            }
-            idx_t k = 0;
-            v = 0;
-            for (int i = 0; i < nn; i++) {
-                if (vid[i] < 0)
-                    continue;
-                const NsIntList *l = &M->node_tets[i];
-                xadj[v] = k;
-                vwgt[v] = l->count > 0 ? l->count : 1;
-                for (int q = 0; q < l->count; q++) {
-                    const int *tn = M->tet_node + 4 * l->items[q];
-                    for (int b = 0; b < 4; b++)
-                        if (tn[b] != i && seen[tn[b]] != i && vid[tn[b]] >= 0) {
-                            seen[tn[b]] = i;
-                            adj[k++] = vid[tn[b]];
-                        }
-                }
-                v++;
-            }
-            xadj[nv] = k;
-            idx_t opt[METIS_NOPTIONS];
-            METIS_SetDefaultOptions(opt);
-            opt[METIS_OPTION_SEED] = 1; /* the same partition every run, for stable timings */
-            if (METIS_PartGraphKway(&nv, &ncon, xadj, adj, vwgt, NULL, NULL, &np, NULL, NULL, opt,
-                                    &cut, vpart) == METIS_OK)
-                for (int i = 0; i < nn; i++)
-                    if (vid[i] >= 0 && vpart[vid[i]] >= 0 && vpart[vid[i]] < parts)
-                        part[i] = (int)vpart[vid[i]];
-        }
-        free(vid);
-        free(xadj);
-        free(adj);
-        free(vwgt);
-        free(vpart);
-        free(seen);
+        metis_partition(M, parts, part);
         t->part_metis_age = 0;
     }
     if (parts > 1 && nn > t->node_part_cap) {

@@ -21,6 +21,7 @@
 #include "coupling.h"
 #include "ns_config.h"
 #include "scenario.h"
+#include "step.h"
 
 #define KINDS    2
 #define PATH_CAP 256
@@ -171,8 +172,9 @@ int main(int argc, char **argv)
             ns_tissue_free(&t[k]);
             goto done;
         }
-        rod[k].v_insert = 0.01;
     }
+    const double v_base[3] = {0, 0, 0};
+    NsStepControls ctl = ns_step_controls(0.01, v_base, 0.0); /* in at 10 mm/s */
     printf("%s: %d tets, %d nodes; path of %d nodes laid along +z at x %.0f mm, y %.0f mm, tip "
            "starting %d nodes in; %d steps of %.0f ms at 10 mm/s, %d thread(s)\n",
            sc.name, sc.mesh.tet_alive, sc.mesh.node_alive, np, 1e3 * a[0], 1e3 * a[1], tipn, steps,
@@ -180,7 +182,7 @@ int main(int argc, char **argv)
     for (int i = 0; i < steps; i++) {
         for (int k = 0; k < KINDS; k++) {
             NsCouplingStats st;
-            if (ns_coupled_step(&c[k], dt, NULL, NULL, &st)) {
+            if (ns_step(&c[k], &ctl, dt, &st)) {
                 fprintf(stderr, "bench_coupling: %s: step %d failed\n",
                         ns_coupled_solver_name(kinds[k]), i);
                 goto done;

@@ -8,6 +8,7 @@
 #include "coupling.h"
 #include "mesh_grid.h"
 #include "ns_test.h"
+#include "step.h"
 
 typedef struct Scene {
     NsMesh mesh;
@@ -239,7 +240,31 @@ static int init_checks(void)
     return 0;
 }
 
+/* The step's scratch comes from its arena, empty after every step; once a step of the same
+ * sizes has run, the next allocates nothing from it (the controls are ns_step's input). */
+static int arena_empty_and_steady(void)
+{
+    Scene s;
+    ENSURE(scene_make(&s, NS_COUPLED_SCHUR, 1, 10) == 0);
+    const double vb[3] = {0, 0, 0};
+    NsStepControls ctl = ns_step_controls(0.0, vb, 0.0);
+    long spills = 0;
+    for (int k = 0; k < 12; k++) {
+        NsCouplingStats st;
+        ENSURE(ns_step(&s.cpl, &ctl, 5e-3, &st) == 0);
+        ENSURE(ns_arena_mark(&s.cpl.arena) == 0);
+        if (k == 1)
+            spills = s.cpl.arena.spills;
+        if (k > 1)
+            ENSURE(s.cpl.arena.spills == spills);
+    }
+    ENSURE(spills > 0 && s.cpl.arena.cap > 0);
+    scene_free(&s);
+    return 0;
+}
+
 NS_TEST_MAIN({"deterministic_for_any_threads", deterministic_for_any_threads},
              {"background_refresh_is_deterministic", background_refresh_is_deterministic},
              {"switch_solver_between_steps", switch_solver_between_steps},
-             {"tip_block_same_trajectory", tip_block_same_trajectory}, {"init_checks", init_checks})
+             {"tip_block_same_trajectory", tip_block_same_trajectory}, {"init_checks", init_checks},
+             {"arena_empty_and_steady", arena_empty_and_steady})
