@@ -3,6 +3,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdbool.h>
 #include <stdio.h>
@@ -126,13 +127,23 @@ static lua_State *volatile active_L;
 static volatile int active_mask;
 static volatile sig_atomic_t forced;
 
+static pthread_t active_thread; /* the thread running active_L */
+
+/* Runs in a signal handler. lua_sethook is only safe on the thread the signal interrupted
+ * when that thread is the one running Lua (another thread would race with its calls and
+ * returns): on any other thread (the solver's workers, the background factorization) the
+ * signal is passed on to the Lua thread instead. */
 static void force_check(void)
 {
     lua_State *L = active_L;
-    if (L) {
-        forced = 1;
-        lua_sethook(L, hook, active_mask, 1);
+    if (!L)
+        return;
+    if (!pthread_equal(pthread_self(), active_thread)) {
+        pthread_kill(active_thread, SIGALRM);
+        return;
     }
+    forced = 1;
+    lua_sethook(L, hook, active_mask, 1);
 }
 
 static void on_alarm(int sig)
@@ -313,6 +324,7 @@ int ns_lua_call(NsLua *rt, int nargs, int nresults, char *err, int err_sz)
     lua_State *outer = active_L;
     int outer_mask = active_mask;
     active_mask = rt->hook_mask;
+    active_thread = pthread_self();
     active_L = L;
     if (!outer)
         watch(true);

@@ -7,16 +7,11 @@
 #ifndef NS_NAMES_H
 #define NS_NAMES_H
 
-#include "run_spec.h"
-#include "scenario.h"
+/* The rule, as messages state it. */
+#define NS_NAME_RULE "1 to 64 bytes of printable ASCII without ',', '\"' or '\\' (spaces are fine)"
 
 /* 0 when name follows the rule; else -1 with what is wrong in why ("byte 3 is 0x0a"). */
 int ns_name_check(const char *name, char *why, int why_sz);
-
-/* Every name of the scenario's regions and of the run's targets, markers and obstacles: 0, or
- * -1 with "file:line: ns.scenario: markers[2] name must be ... (got '...': byte 3 is 0x0a)"
- * in err (the place of the ns.scenario{} call). */
-int ns_names_check_run(const NsScenario *sc, const NsRunSpec *spec, char *err, int err_sz);
 
 /* Makes a message one line for the terminal: control characters (a newline a scenario put in a
  * string the message quotes) become spaces. */

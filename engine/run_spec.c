@@ -334,6 +334,50 @@ static int check_spec(const NsScenario *sc, const NsRunSpec *s, char *err, int e
     return 0;
 }
 
+/* The name as a message may show it: at most 40 bytes, unprintable bytes as '?'. */
+static const char *shown(const char *s, char out[48])
+{
+    size_t n = 0;
+    for (; s[n] && n < 40; n++)
+        out[n] = (unsigned char)s[n] < 0x20 || (unsigned char)s[n] > 0x7e ? '?' : s[n];
+    if (s[n])
+        memcpy(out + n, "...", 4);
+    else
+        out[n] = '\0';
+    return out;
+}
+
+static int check_one(const NsScenario *sc, const char *list, int i, const char *name, char *err,
+                     int err_sz)
+{
+    char why[64], show[48];
+    if (ns_name_check(name, why, sizeof why) == 0)
+        return 0;
+    ns_set_err(err, err_sz, "%s: ns.scenario: %s[%d]: name must be " NS_NAME_RULE " (got '%s': %s)",
+               sc->where, list, i + 1, shown(name, show), why);
+    return -1;
+}
+
+/* Every name of the scenario's regions and of the run's targets, markers and obstacles
+ * (names.h's rule): 0, or -1 with "file:line: ns.scenario: markers[2] name must be ... (got
+ * '...': byte 3 is 0x0a)" in err (the place of the ns.scenario{} call). */
+static int names_check_run(const NsScenario *sc, const NsRunSpec *spec, char *err, int err_sz)
+{
+    for (int i = 0; i < sc->region_count; i++)
+        if (check_one(sc, "regions", i, sc->regions[i].name, err, err_sz))
+            return -1;
+    for (int i = 0; i < spec->target_count; i++)
+        if (check_one(sc, "targets", i, spec->targets[i].name, err, err_sz))
+            return -1;
+    for (int i = 0; i < spec->marker_count; i++)
+        if (check_one(sc, "markers", i, spec->markers[i].name, err, err_sz))
+            return -1;
+    for (int i = 0; i < spec->obstacle_count; i++)
+        if (check_one(sc, "obstacles", i, spec->obstacles[i].name, err, err_sz))
+            return -1;
+    return 0;
+}
+
 int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_sz)
 {
     memset(spec, 0, sizeof *spec);
@@ -453,7 +497,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     lua_settop(L, si);
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
-    rc = rc ? rc : ns_names_check_run(sc, spec, err, err_sz); /* names.h: CSV- and JSON-safe */
+    rc = rc ? rc : names_check_run(sc, spec, err, err_sz); /* names.h: CSV- and JSON-safe */
     lua_settop(L, top);
     if (rc == 0)
         rc = check_spec(sc, spec, err, err_sz);
