@@ -94,8 +94,8 @@ typedef struct NsCouplingParams {
     int refresh_iterations;
     /* schur: order the tip's ring last in the tissue factor and make its block current every
      * step, projecting between the preconditioner's substitutions (docs/solvers.md, "The
-     * tail"): about a fifth fewer PCG iterations. 0 by default: docs/performance.md, "The
-     * twenty-sixth stop", says why */
+     * tail"): about a fifth fewer PCG iterations. 0 by default: docs/performance.md, "Settings
+     * measured but not default", says why */
     int tip_block;
     /* 0: the tip cuts along the pre-laid path (sim/needle_path.h); 1: the tissue is remeshed
      * at the tip every step it slides (Algorithm 2, sim/remesh.h), the path then being the

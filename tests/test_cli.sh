@@ -149,6 +149,20 @@ if [ "$RC" = 0 ] && grep -q '^needlesim [0-9]' "$OUT"; then
 else
     fail "--version" "exit $RC, stdout: $(head -1 "$OUT")"
 fi
+# Where the data is looked for (engine/data_dir.h): the environment first, as given ...
+if grep -qxF "scripts: $ROOT/scripts (found via NEEDLESIM_SCRIPTS)" "$OUT"; then
+    pass "--version: scripts from NEEDLESIM_SCRIPTS"
+else
+    fail "--version: scripts" "no 'scripts: $ROOT/scripts (found via NEEDLESIM_SCRIPTS)' in: $(tr '\n' '|' <"$OUT")"
+fi
+# ... and without it, a binary inside its build folder reads the source tree it was built from.
+env -u NEEDLESIM_SCRIPTS -u NEEDLESIM_SCENARIOS "$BIN" --version >"$OUT" 2>"$ERR"
+if grep -q "^scenarios: .*/scenarios (found via the build folder's source tree)$" "$OUT" &&
+    grep -q "^scripts: .*/scripts (found via the build folder's source tree)$" "$OUT"; then
+    pass "--version: the build folder's source tree"
+else
+    fail "--version: no environment" "$(tr '\n' '|' <"$OUT")"
+fi
 
 run --help
 if [ "$RC" = 0 ] && grep -q 'needlesim check SCENARIO.lua' "$OUT"; then
