@@ -84,7 +84,9 @@ void ns_control_log_free(NsControlLog *log);
 /* Whether the log may drive a replay of the scenario `name` whose file hashes to `hash`: 0 when
  * its #scenario_hash is that hash; when it is another, -1 with "path:line: recorded against
  * scenario 'X' (hash ...), not 'Y' (hash ...); --rescore replays it anyway" in err, or, with
- * rescore, 0 and a note on stderr; without a #scenario_hash line, 0 and a warning on stderr. */
+ * rescore, 0 and a note in `note`; without a #scenario_hash line, 0 and a warning in `note`
+ * (the caller says it once the run has succeeded, so a failed run's message stays one line).
+ * note is "" when there is nothing to say. */
 int ns_control_log_check_scenario(const NsControlLog *log, const char *path, const char *name,
                                   uint64_t hash, bool rescore, char *note, int note_sz, char *err,
                                   int err_sz);

@@ -120,7 +120,7 @@ int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz)
      * them, and a failed run leaves them as they were. */
     free(old_t);
     free(old_r);
-    if (rc == 0 && ns_run_render_clear_old(r->opt.out_dir, r->opt.frames, err, err_sz))
+    if (rc == 0 && ns_run_render_check_old(r->opt.out_dir, r->opt.frames, err, err_sz))
         rc = -1;
     if (rc == 0) {
         r->traj = ns_out_create_part(r->traj_tmp, "the trajectory", err, err_sz);

@@ -95,7 +95,7 @@ static int remove_frames_dir(const char *dir)
     return rmdir(dir);
 }
 
-int ns_run_render_clear_old(const char *out_dir, bool frames, char *err, int err_sz)
+int ns_run_render_check_old(const char *out_dir, bool frames, char *err, int err_sz)
 {
     char *sheet = join(out_dir, "summary.png", ""), *dir = join(out_dir, "frames", "");
     int rc = 0;
@@ -351,7 +351,7 @@ int ns_run_render_commit(NsRunRender *rr, char *err, int err_sz)
     /* Each rename is recorded, so that a failure here or after (the control log) takes every
      * picture back out (ns_run_render_uncommit). */
     if (rr->o.frames) {
-        remove_frames_dir(rr->frames_dir); /* frames only: ns_run_render_clear_old checked */
+        remove_frames_dir(rr->frames_dir); /* frames only: ns_run_render_check_old checked */
         if (rename(rr->frames_tmp, rr->frames_dir) != 0) { /* (a folder: checked at open) */
             ns_set_err(err, err_sz, "cannot write '%s': %s", rr->frames_dir, strerror(errno));
             return -1;

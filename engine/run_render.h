@@ -44,10 +44,11 @@ typedef struct NsRunRender {
     int committed; /* bits: frames (1), video (2), sheet (4) renamed into place */
 } NsRunRender;
 
-/* Before a run writes anything in out_dir: removes an earlier run's summary.png and frames/
- * (only if it holds nothing but NNNNNN.png files). With frames (the run will write frames/),
- * a frames/ holding other files is an error, and nothing is removed. */
-int ns_run_render_clear_old(const char *out_dir, bool frames, char *err, int err_sz);
+/* Before a run writes anything in out_dir: an earlier summary.png must be a regular file and
+ * frames/ a folder; with frames (the run will write frames/), a frames/ holding files other
+ * than NNNNNN.png is an error. Nothing is removed here: the earlier pictures stay until this
+ * run's replace them (ns_run_render_commit). */
+int ns_run_render_check_old(const char *out_dir, bool frames, char *err, int err_sz);
 /* Opens the renderer (and ffmpeg for a video). Nothing is written yet. */
 int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int err_sz);
 /* A frame of the run to the frames folder and the video. */
