@@ -27,8 +27,17 @@
 /* A line event (only while the scenario chunk runs) costs about this many instructions, and
  * is charged so (a tight endless loop fires one per iteration). */
 #define NS_LINE_EVENT_COST 8
-/* Memory a scenario's Lua state may hold; past it allocations fail ("not enough memory"). */
-#define NS_LUA_MEMORY_LIMIT NS_LIMIT_LUA_MEMORY
+/* Memory a scenario's Lua state may hold (past it allocations fail, "not enough memory") and
+ * the instructions its loading may run: the limits of ns_limits.h unless a harness lowered them
+ * (ns_lua_set_limits). */
+static size_t lua_memory_limit = NS_LIMIT_LUA_MEMORY;
+static long long load_instructions = NS_LIMIT_LOAD_INSTRUCTIONS;
+
+void ns_lua_set_limits(long long instructions, size_t memory_bytes)
+{
+    load_instructions = instructions;
+    lua_memory_limit = memory_bytes;
+}
 
 struct NsLua {
     lua_State *L;
@@ -102,7 +111,7 @@ static void *limited_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
         rt->memory -= old;
         return NULL;
     }
-    if (nsize > old && (rt->memory - old + nsize > NS_LUA_MEMORY_LIMIT ||
+    if (nsize > old && (rt->memory - old + nsize > lua_memory_limit ||
                         rt->memory_hits > NS_LUA_MEMORY_RETRIES)) {
         rt->memory_hits++;
         return NULL;
@@ -337,7 +346,7 @@ int ns_lua_call(NsLua *rt, int nargs, int nresults, char *err, int err_sz)
         /* No message handler runs for memory errors, so no file:line either. */
         snprintf(err, (size_t)err_sz, "%s: not enough memory (a scenario may use %d MiB)",
                  rt->scenario_source ? rt->scenario_source + 1 : "needlesim",
-                 (int)(NS_LUA_MEMORY_LIMIT >> 20));
+                 (int)(lua_memory_limit >> 20));
         lua_pop(L, 1);
         lua_remove(L, base);
         return -1;
@@ -635,9 +644,9 @@ static int sandbox_rep(lua_State *L)
     lua_Integer n = luaL_checkinteger(L, 2);
     luaL_optlstring(L, 3, "", &lsep);
     double bytes = n > 0 ? (double)n * (double)(l + lsep) : 0.0;
-    if (bytes > (double)NS_LIMIT_LUA_MEMORY)
+    if (bytes > (double)lua_memory_limit)
         return luaL_error(L, "string.rep: %d MiB is more than a scenario may hold (%d MiB)",
-                          (int)(bytes / 1048576.0), (int)(NS_LIMIT_LUA_MEMORY >> 20));
+                          (int)(bytes / 1048576.0), (int)(lua_memory_limit >> 20));
     rt->remaining -= (long long)(bytes / 4.0);
     if (rt->remaining <= 0) {
         char buf[200];
@@ -763,7 +772,7 @@ NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
     *(NsLua **)lua_getextraspace(rt->L) = rt;
     lua_atpanic(rt->L, panic);
     rt->hook_mask = LUA_MASKCOUNT;
-    ns_lua_begin_phase(rt, "loading the scenario", NS_LIMIT_LOAD_INSTRUCTIONS,
+    ns_lua_begin_phase(rt, "loading the scenario", load_instructions,
                        NS_LIMIT_LOAD_SECONDS, 0.0);
     lua_pushcfunction(rt->L, open_sandbox);
     if (ns_lua_call(rt, 0, 0, err, err_sz) != 0) {

@@ -28,6 +28,12 @@ typedef struct NsLua NsLua;
 NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz);
 void ns_lua_close(NsLua *rt);
 
+/* Lowers, for every sandbox opened after it in this process, the instructions a scenario's
+ * loading may run and the memory its Lua state may hold (defaults: NS_LIMIT_LOAD_INSTRUCTIONS,
+ * NS_LIMIT_LUA_MEMORY). For the fuzzing harness, whose inputs must each end in milliseconds;
+ * needlesim itself never calls it. */
+void ns_lua_set_limits(long long instructions, size_t memory_bytes);
+
 lua_State *ns_lua_state(NsLua *rt);
 const char *ns_lua_scripts_dir(const NsLua *rt);
 /* The scenario's folder ("." when the path has none). */

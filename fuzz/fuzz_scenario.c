@@ -11,6 +11,7 @@
  *     build-fuzz/fuzz/fuzz_scenario fuzz/corpus/scenario -dict=fuzz/scenario.dict   (tools/fuzz.sh)
  */
 #include "fuzz_file.h"
+#include "lua_runtime.h"
 #include "run_spec.h"
 #include "scenario.h"
 
@@ -22,6 +23,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
      * run's time limit per input under the sanitizers: 2 MiB (about 4,000 lattice vertices)
      * keeps every input's meshing fast, and the limit's own path is exercised all the more. */
     ns_scenario_set_mesher_budget(2.0 * 1048576.0);
+    /* Likewise the script's own budgets: an endless loop runs the full 5e8 instructions in
+     * about 7 s under the sanitizers and a heap-filling one 5 s, and mutations find both often
+     * enough to hold the campaign to ~50 executions/s. 5e6 instructions (about 0.07 s; the
+     * corpus's largest scenario loads in under a tenth of it) and 32 MiB keep each input short;
+     * the same checks stop it, only sooner. */
+    ns_lua_set_limits(5000000, (size_t)32 << 20);
     const char *path = fuzz_write_file("input.lua", data, size);
     NsScenario sc;
     char err[1024] = "";
