@@ -27,6 +27,7 @@
  * which configurations are tried, never the tolerance of the accepted solution. */
 #include "coupling_internal.h"
 #include "ns_config.h"
+#include "snapshot.h"
 #include "vec.h"
 
 #include <math.h>
@@ -1389,4 +1390,17 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
     ns_arena_pop(S->arena, next);
     ns_arena_pop(S->arena, h2);
     return rc;
+}
+
+/* ---- snapshots (sim/snapshot.h) ---- */
+
+int coupled_schur_pack(NsPack *p, CoupledSchur **w)
+{
+    uint8_t present = *w != NULL;
+    NS_PACK(p, present);
+    if (!p->writing)
+        *w = NULL;
+    if (present)
+        ns_pack_fail(p, "schur: snapshots of our solver's state are not implemented yet");
+    return p->failed ? -1 : 0;
 }

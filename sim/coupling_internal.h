@@ -47,6 +47,9 @@ int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st);
 typedef struct CoupledSchur CoupledSchur;
 CoupledSchur *coupled_schur_create(void);
 void coupled_schur_destroy(CoupledSchur *w);
+/* Our solver's state between steps, packed (sim/snapshot.h; *w NULL allowed both ways). */
+struct NsPack;
+int coupled_schur_pack(struct NsPack *p, CoupledSchur **w);
 int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st);
 
 /* The paper's solver (coupled_paper.c): Algorithm 3 with CG on Eq. 7 per trial. */

@@ -12,6 +12,7 @@
  * CHUNK entries; a chunk is computed whole by one thread, and a dot product is the sum of the
  * chunk partials taken in chunk order on the calling thread. */
 #include "solver.h"
+#include "snapshot.h"
 
 #include "ns_config.h"
 #include "supernodal.h"
@@ -1239,4 +1240,17 @@ int ns_solver_tail_block(NsSolver *s, int n3, const double **L22)
         return 0;
     *L22 = s->tail_cur ? s->tail_cur : s->tail_L0;
     return s->tail_k;
+}
+
+/* ---- snapshots (sim/snapshot.h) ---- */
+
+int ns_solver_pack(NsPack *p, NsSolver **s)
+{
+    uint8_t present = *s != NULL;
+    NS_PACK(p, present);
+    if (!p->writing)
+        *s = NULL;
+    if (present)
+        ns_pack_fail(p, "solver: snapshots of a factored solver are not implemented yet");
+    return p->failed ? -1 : 0;
 }
