@@ -40,9 +40,13 @@ extern const int ns_validate_rod_case_count;
 extern const NsValidateCase ns_validate_coupling_cases[];
 extern const int ns_validate_coupling_case_count;
 
-/* The tip remeshing and steering cases (engine/validate_remesh.c). */
+/* The tip remeshing cases (engine/validate_remesh.c). */
 extern const NsValidateCase ns_validate_remesh_cases[];
 extern const int ns_validate_remesh_case_count;
+
+/* The bevel steering cases (engine/validate_steering.c). */
+extern const NsValidateCase ns_validate_steering_cases[];
+extern const int ns_validate_steering_case_count;
 
 /* Appends printf-style text to r->detail. */
 void ns_validate_detail(NsValidateResult *r, const char *fmt, ...)
