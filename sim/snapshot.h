@@ -77,7 +77,7 @@ int ns_pack_checksum(NsPack *p);
 int ns_pack_tag(NsPack *p, const char tag[4]);
 
 /* The layout of the structures snapshots hold, as a hash of their sizes: a snapshot written by
- * a build whose structures differ is refused. */
+ * a build whose structures differ is refused. sim/world.c, as the world's functions below. */
 uint64_t ns_pack_fingerprint(void);
 
 /* ---- The structures' pack functions, each in its structure's file. Writing reads the
