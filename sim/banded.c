@@ -1,5 +1,6 @@
 /* Banded 3x3-block SPD matrix and band Cholesky solver for the needle rod (§3.1). */
 #include "banded.h"
+#include "snapshot.h"
 
 #include <float.h>
 #include <math.h>
@@ -182,4 +183,21 @@ int ns_banded_solve(const NsBanded *m, const uint8_t *dof_fixed, const double *b
     if (ns_banded_factor(m, dof_fixed))
         return -1; /* x unchanged */
     return ns_banded_solve_factored(m, dof_fixed, b, x, work);
+}
+
+static void banded_blank(void *e)
+{
+    NsBanded *h = e;
+    h->val = h->fac = NULL;
+}
+
+/* The blocks and the factor buffer (the last factor and the solve's scratch), whole. */
+int ns_banded_pack(NsPack *p, NsBanded *B)
+{
+    ns_pack_struct(p, "BAND", B, sizeof *B, banded_blank);
+    size_t n = B->n > 0 ? (size_t)B->n : 0, half = B->half > 0 ? (size_t)B->half : 0;
+    size_t nval = n * (2 * half + 1) * 9, nfac = 3 * n * (3 * (half + 1) + 1);
+    NS_PACK_ARRAY(p, B->val, nval, nval);
+    NS_PACK_ARRAY(p, B->fac, nfac, nfac);
+    return p->failed ? -1 : 0;
 }

@@ -6,7 +6,9 @@
 #include "coupling.h"
 #include "coupling_internal.h"
 #include "quality.h"
+#include "snapshot.h"
 
+#include <assert.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -236,6 +238,68 @@ void ns_coupled_free(NsCoupled *c)
     coupled_schur_destroy(c->schur);
     ns_remesh_stack_free(&c->remesh);
     memset(c, 0, sizeof *c);
+}
+
+/* The arena: its size only (a reader starts an empty arena grown to it, so that the next step
+ * allocates no more than the original's would); its blocks are a step's scratch, none live
+ * between steps. */
+static void arena_pack(NsPack *p, NsArena *a)
+{
+    size_t cap = a->cap;
+    if (p->writing) {
+        assert(ns_arena_mark(a) == 0);
+        if (ns_arena_mark(a) != 0)
+            ns_pack_fail(p, "coupling: a snapshot taken inside a step (%d scratch blocks live)",
+                         ns_arena_mark(a));
+    } else {
+        ns_arena_init(a);
+    }
+    NS_PACK(p, cap);
+    if (p->writing || p->failed)
+        return;
+    if (cap % NS_ARENA_ALIGN != 0 || cap > NS_PACK_MAX_BYTES - p->allocated) {
+        ns_pack_fail(p, "coupling: a scratch arena of %zu bytes", cap);
+        return;
+    }
+    a->peak = cap;
+    ns_arena_grow(a); /* out of memory: the arena still works, from malloc */
+    a->peak = 0;
+}
+
+static void coupled_blank(void *e)
+{
+    NsCoupled *h = e;
+    h->tissue = NULL;
+    h->rod = NULL;
+    memset(&h->path, 0, sizeof h->path);
+    memset(&h->remesh, 0, sizeof h->remesh);
+    memset(&h->arena, 0, sizeof h->arena);
+    h->schur = NULL;
+    h->ta = h->tb = NULL;
+    h->tw = NULL;
+    h->state = NULL;
+}
+
+/* The coupling's own arrays (cap), the path (path_cap), the remesh stack, our solver's state
+ * (coupled_schur_pack) and the arena's size; tissue and rod are borrowed (a reader takes those
+ * given, already read). */
+int ns_coupled_pack(NsPack *p, NsCoupled *c, NsTissue *tissue, NsRod *rod)
+{
+    ns_pack_struct(p, "CPLD", c, sizeof *c, coupled_blank);
+    if (!p->writing) {
+        c->tissue = tissue;
+        c->rod = rod;
+    }
+    size_t cap = (size_t)c->cap;
+    NS_PACK_ARRAY(p, c->ta, cap, cap);
+    NS_PACK_ARRAY(p, c->tb, cap, cap);
+    NS_PACK_ARRAY(p, c->tw, cap, cap);
+    NS_PACK_ARRAY(p, c->state, cap, cap);
+    ns_needle_path_pack_cap(p, &c->path, c->path_cap);
+    ns_remesh_stack_pack(p, &c->remesh);
+    coupled_schur_pack(p, &c->schur);
+    arena_pack(p, &c->arena);
+    return p->failed ? -1 : 0;
 }
 
 int ns_coupled_check_structure(const NsCoupled *c, char *err, int err_sz)

@@ -2,6 +2,7 @@
  * free node indices for new nodes), node->tet incidence and face adjacency kept current on
  * every change, an order-independent topology hash, and a whole-mesh invariant checker. */
 #include "mesh.h"
+#include "snapshot.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -302,6 +303,49 @@ int ns_mesh_copy(NsMesh *dst, const NsMesh *src)
 fail:
     ns_mesh_free(dst);
     return -1;
+}
+
+static void list_blank(void *e)
+{
+    ((NsIntList *)e)->items = NULL;
+}
+
+/* Node arrays up to node_slots (the rest of node_cap is written before it is read), node_tets
+ * over all of node_cap with each list's items in its own allocation (the order matters: sums are
+ * taken in it), tet arrays up to tet_slots, the free lists. */
+static void mesh_blank(void *e)
+{
+    NsMesh *h = e;
+    h->u = h->x = h->v = h->a = NULL;
+    h->flags = NULL;
+    h->node_tets = NULL;
+    h->node_changed = NULL;
+    h->tet_node = h->tet_region = h->tet_adj = NULL;
+    h->free_nodes = h->free_tets = NULL;
+}
+
+int ns_mesh_pack(NsPack *p, NsMesh *m)
+{
+    ns_pack_struct(p, "MESH", m, sizeof *m, mesh_blank);
+    size_t ns = (size_t)m->node_slots, nc = (size_t)m->node_cap;
+    size_t ts = (size_t)m->tet_slots, tc = (size_t)m->tet_cap;
+    NS_PACK_ARRAY(p, m->u, 3 * ns, 3 * nc);
+    NS_PACK_ARRAY(p, m->x, 3 * ns, 3 * nc);
+    NS_PACK_ARRAY(p, m->v, 3 * ns, 3 * nc);
+    NS_PACK_ARRAY(p, m->a, 3 * ns, 3 * nc);
+    NS_PACK_ARRAY(p, m->flags, nc, nc);
+    NS_PACK_ARRAY(p, m->node_changed, nc, nc);
+    NS_PACK_ARRAY_BLANK(p, m->node_tets, nc, nc, list_blank);
+    for (size_t i = 0; m->node_tets && i < nc; i++) {
+        NsIntList *l = &m->node_tets[i];
+        NS_PACK_ARRAY(p, l->items, (size_t)l->count, (size_t)l->cap);
+    }
+    NS_PACK_ARRAY(p, m->tet_node, 4 * ts, 4 * tc);
+    NS_PACK_ARRAY(p, m->tet_region, ts, tc);
+    NS_PACK_ARRAY(p, m->tet_adj, 4 * ts, 4 * tc);
+    NS_PACK_ARRAY(p, m->free_nodes, (size_t)m->free_node_count, (size_t)m->free_node_cap);
+    NS_PACK_ARRAY(p, m->free_tets, (size_t)m->free_tet_count, (size_t)m->free_tet_cap);
+    return p->failed ? -1 : 0;
 }
 
 /* splitmix64 finalizer: a well-mixed 64-bit hash of one value. */

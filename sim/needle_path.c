@@ -1,10 +1,12 @@
 /* The needle's pre-laid path through the tissue (sim/needle_path.h): the stand-in for tip
  * remeshing (§3.4.1) while the coupling of §3.3 is tested on its own. */
 #include "needle_path.h"
+#include "snapshot.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 static double dist3(const double *a, const double *b)
 {
@@ -129,4 +131,31 @@ double ns_needle_path_cut_force(const NsNeedlePath *p, const NsMesh *m, const do
             f = cut_force[r];
     }
     return f;
+}
+
+/* cap < 0: allocations of count entries (a path of its own, ns_needle_path_init's). */
+static void path_blank(void *e)
+{
+    NsNeedlePath *h = e;
+    h->node = NULL;
+    h->s = NULL;
+}
+
+static int path_pack(NsPack *p, NsNeedlePath *path, int cap)
+{
+    ns_pack_struct(p, "PATH", path, sizeof *path, path_blank);
+    size_t n = (size_t)path->count, c = cap < 0 ? n : (size_t)cap;
+    NS_PACK_ARRAY(p, path->node, n, c);
+    NS_PACK_ARRAY(p, path->s, n, c);
+    return p->failed ? -1 : 0;
+}
+
+int ns_needle_path_pack_cap(NsPack *p, NsNeedlePath *path, int cap)
+{
+    return path_pack(p, path, cap > 0 ? cap : 0);
+}
+
+int ns_needle_path_pack(NsPack *p, NsNeedlePath *path)
+{
+    return path_pack(p, path, -1);
 }

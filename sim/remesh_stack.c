@@ -4,6 +4,7 @@
 #include "remesh.h"
 #include "quality.h"
 #include "remesh_internal.h"
+#include "snapshot.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -25,6 +26,42 @@ void ns_remesh_stack_free(NsRemeshStack *s)
     free(s->snap_node);
     free(s->snap_u);
     memset(s, 0, sizeof *s);
+}
+
+static void op_blank(void *e)
+{
+    NsRemeshOp *op = e;
+    op->removed_tet = NULL;
+    op->added_tet = NULL;
+}
+
+static void stack_blank(void *e)
+{
+    NsRemeshStack *h = e;
+    h->ops = NULL;
+    h->snap_node = NULL;
+    h->snap_u = NULL;
+}
+
+/* The ops (each with what it removed and added, in the allocations ns_remesh_split made: removed
+ * x 6 and removed x kind) and the first-snap records. */
+int ns_remesh_stack_pack(NsPack *p, NsRemeshStack *s)
+{
+    ns_pack_struct(p, "RSTK", s, sizeof *s, stack_blank);
+    size_t count = (size_t)s->count;
+    NS_PACK_ARRAY_BLANK(p, s->ops, count, (size_t)s->cap, op_blank);
+    for (size_t i = 0; s->ops && i < count; i++) {
+        NsRemeshOp *op = &s->ops[i];
+        size_t removed = (size_t)op->removed;
+        NS_PACK_ARRAY(p, op->removed_tet, 6 * removed, 6 * removed);
+        NS_PACK_ARRAY(p, op->added_tet, (size_t)op->added, removed * (size_t)op->kind);
+    }
+    if (!p->writing && !s->ops)
+        s->count = s->cap = 0; /* what ns_remesh_stack_free walks */
+    size_t snaps = (size_t)s->snaps, snap_cap = (size_t)s->snap_cap;
+    NS_PACK_ARRAY(p, s->snap_node, snaps, snap_cap);
+    NS_PACK_ARRAY(p, s->snap_u, 3 * snaps, 3 * snap_cap);
+    return p->failed ? -1 : 0;
 }
 
 /* Tets containing every node of the simplex, into out (cap); returns their count. */

@@ -10,6 +10,7 @@
 
 #include "err.h"
 #include "rod_internal.h"
+#include "snapshot.h"
 
 /* ---- small vector helpers ---- */
 
@@ -275,6 +276,42 @@ int rod_reserve(NsRod *r, int cap)
     r->A = A;
     r->cap = c;
     return 0;
+}
+
+static void rod_blank(void *e)
+{
+    NsRod *h = e;
+    h->x = h->v = h->a = h->mass = h->force = h->rest_len = h->theta = NULL;
+    h->ref_t = h->ref_d1 = h->ref_twist = h->rest_curv = h->work = NULL;
+    h->pinned = NULL;
+    memset(&h->K, 0, sizeof h->K);
+    memset(&h->D, 0, sizeof h->D);
+    memset(&h->A, 0, sizeof h->A);
+}
+
+/* Every per-node array over all of cap (the tails matter when the rod grows), the scratch whole
+ * (it keeps the step's saved start between begin_step and end_step), K, D and A. */
+int ns_rod_pack(NsPack *p, NsRod *r)
+{
+    ns_pack_struct(p, "ROD ", r, sizeof *r, rod_blank);
+    size_t c = (size_t)r->cap;
+    NS_PACK_ARRAY(p, r->x, 3 * c, 3 * c);
+    NS_PACK_ARRAY(p, r->v, 3 * c, 3 * c);
+    NS_PACK_ARRAY(p, r->a, 3 * c, 3 * c);
+    NS_PACK_ARRAY(p, r->mass, c, c);
+    NS_PACK_ARRAY(p, r->force, 3 * c, 3 * c);
+    NS_PACK_ARRAY(p, r->rest_len, c, c);
+    NS_PACK_ARRAY(p, r->theta, c, c);
+    NS_PACK_ARRAY(p, r->ref_t, 3 * c, 3 * c);
+    NS_PACK_ARRAY(p, r->ref_d1, 3 * c, 3 * c);
+    NS_PACK_ARRAY(p, r->ref_twist, c, c);
+    NS_PACK_ARRAY(p, r->rest_curv, 2 * c, 2 * c);
+    NS_PACK_ARRAY(p, r->pinned, c, c);
+    NS_PACK_ARRAY(p, r->work, WORK_PER_NODE * c, WORK_PER_NODE * c);
+    ns_banded_pack(p, &r->K);
+    ns_banded_pack(p, &r->D);
+    ns_banded_pack(p, &r->A);
+    return p->failed ? -1 : 0;
 }
 
 void ns_rod_free(NsRod *r)

@@ -4,10 +4,11 @@
  *
  * One function per structure serves both ways (ns_tissue_pack, ns_rod_pack, ns_coupled_pack,
  * ns_solver_pack, ...): with a writer it writes the structure, with a reader it fills a
- * structure from nothing. The structure's own bytes go first, whole (its scalars); then every
- * pointer it owns is packed as an array (NS_PACK_ARRAY), which on reading replaces the stale
- * address the bytes carried; pointers it does not own (borrowed, per-step scratch views) are
- * set by the reader. A snapshot is only read by the build that wrote it (ns_pack_fingerprint).
+ * structure from nothing. The structure's own bytes go first, whole (its scalars; its pointers
+ * written as NULL, so that a world and its restored copy write the same bytes); then every
+ * pointer it owns is packed as an array (NS_PACK_ARRAY), which on reading replaces the NULL the
+ * bytes carried; pointers it does not own (borrowed, per-step scratch views) are set by the
+ * reader. A snapshot is only read by the build that wrote it (ns_pack_fingerprint).
  *
  * The stream is a memory buffer (the planner's in-memory snapshots) or a file (checkpoints).
  * Reading checks what it can without knowing the structures: every array's size against the
@@ -29,7 +30,9 @@ typedef struct NsPack {
     size_t pos;          /* bytes read or written so far */
     size_t size;         /* reading: the stream's length (file or buffer) */
     size_t allocated;    /* reading: bytes allocated for arrays so far */
-    uint64_t sum;        /* FNV-1a 64 of every byte so far */
+    uint64_t sum;        /* FNV-1a 64 over the 8-byte words so far (little-endian) */
+    uint64_t tail;       /* the bytes after the last whole word (ntail of them) */
+    int ntail;
     bool failed;
     char err[256]; /* the first failure */
 } NsPack;
@@ -46,14 +49,27 @@ void ns_pack_free(NsPack *p);
 int ns_pack_bytes(NsPack *p, void *data, size_t n);
 /* An owned array at *ptr of count elements of elem bytes, in an allocation of cap elements
  * (cap >= count; a reader allocates cap, zeroed, and reads count; *ptr NULL is packed as NULL).
- * Returns 0 or -1. */
+ * A reader passes the count and cap its structure's fields (already read) give, and a stream
+ * that says otherwise is refused. Returns 0 or -1. */
 int ns_pack_array(NsPack *p, void **ptr, size_t elem, size_t count, size_t cap);
+/* The same for an array of structures that hold pointers: a writer writes each element through
+ * blank (called on a copy; it sets the element's pointers NULL), so that equal worlds write equal
+ * bytes. elem at most NS_PACK_MAX_ELEM. */
+#define NS_PACK_MAX_ELEM 256
+int ns_pack_array_blank(NsPack *p, void **ptr, size_t elem, size_t count, size_t cap,
+                        void (*blank)(void *elem));
 /* The failure "what: detail" (the first one sticks); returns -1. */
 int ns_pack_fail(NsPack *p, const char *fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 2, 3)))
 #endif
     ;
+/* A structure's own bytes (size), after its tag: a writer writes them through blank (called on
+ * a copy; it sets the pointers NULL and empties embedded structures that pack themselves); a
+ * reader zeroes the structure, then reads them. size at most NS_PACK_MAX_STRUCT. Returns 0 or
+ * -1. */
+#define NS_PACK_MAX_STRUCT 8192
+int ns_pack_struct(NsPack *p, const char tag[4], void *s, size_t size, void (*blank)(void *copy));
 /* Writes the checksum of everything so far, or reads it and compares. Returns 0 or -1. */
 int ns_pack_checksum(NsPack *p);
 /* Writes tag (4 bytes) or reads it and compares: a check that both sides agree on where a
@@ -61,7 +77,7 @@ int ns_pack_checksum(NsPack *p);
 int ns_pack_tag(NsPack *p, const char tag[4]);
 
 /* The layout of the structures snapshots hold, as a hash of their sizes: a snapshot written by
- * a build whose structures differ is refused. */
+ * a build whose structures differ is refused. sim/world.c, as the world's functions below. */
 uint64_t ns_pack_fingerprint(void);
 
 /* ---- The structures' pack functions, each in its structure's file. Writing reads the
@@ -85,6 +101,8 @@ int ns_banded_pack(NsPack *p, struct NsBanded *B);              /* sim/banded.c 
 int ns_tissue_pack(NsPack *p, struct NsTissue *t);              /* sim/tissue.c */
 int ns_rod_pack(NsPack *p, struct NsRod *r);                    /* sim/rod.c */
 int ns_needle_path_pack(NsPack *p, struct NsNeedlePath *path);  /* sim/needle_path.c */
+/* The path with its arrays in allocations of cap entries (>= count; NsCoupled.path_cap). */
+int ns_needle_path_pack_cap(NsPack *p, struct NsNeedlePath *path, int cap);
 int ns_remesh_stack_pack(NsPack *p, struct NsRemeshStack *s);   /* sim/remesh_stack.c */
 /* A solver (NULL allowed both ways): writing waits for a background refactorization to finish
  * (without adopting it: it is packed as pending); reading creates the solver. sim/solver.c */
@@ -116,6 +134,9 @@ void ns_world_snapshot_free(NsWorldSnapshot *s);
 #define NS_PACK(p, v) ns_pack_bytes((p), &(v), sizeof(v))
 #define NS_PACK_ARRAY(p, ptr, count, cap)                                                          \
     ns_pack_array((p), (void **)&(ptr), sizeof *(ptr), (size_t)(count), (size_t)(cap))
+#define NS_PACK_ARRAY_BLANK(p, ptr, count, cap, blank)                                             \
+    ns_pack_array_blank((p), (void **)&(ptr), sizeof *(ptr), (size_t)(count), (size_t)(cap),       \
+                        (blank))
 
 /* Bytes one snapshot may allocate when read (a guard against a damaged file asking for more
  * memory than the machine has; the brachytherapy world is about 60 MB). */

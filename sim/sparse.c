@@ -1,5 +1,6 @@
 /* Block sparse matrix with per-row growable storage (§3.6.2). */
 #include "sparse.h"
+#include "snapshot.h"
 
 #include "ns_config.h"
 
@@ -191,4 +192,33 @@ void ns_bsm_mul_threads(const NsBlockMatrix *m, const double *x, double *y, int 
     (void)threads;
 #endif
     ns_bsm_mul(m, x, y);
+}
+
+static void row_blank(void *e)
+{
+    NsBlockRow *r = e;
+    r->col = NULL;
+    r->val = NULL;
+}
+
+/* Every row slot of cap (rows beyond n keep their storage for regrowth), each row's blocks in an
+ * allocation of its cap. */
+static void matrix_blank(void *e)
+{
+    ((NsBlockMatrix *)e)->rows = NULL;
+}
+
+int ns_block_matrix_pack(NsPack *p, NsBlockMatrix *A)
+{
+    ns_pack_struct(p, "BSMX", A, sizeof *A, matrix_blank);
+    size_t cap = (size_t)A->cap;
+    NS_PACK_ARRAY_BLANK(p, A->rows, cap, cap, row_blank);
+    for (size_t i = 0; A->rows && i < cap; i++) {
+        NsBlockRow *r = &A->rows[i];
+        NS_PACK_ARRAY(p, r->col, (size_t)r->count, (size_t)r->cap);
+        NS_PACK_ARRAY(p, r->val, 9 * (size_t)r->count, 9 * (size_t)r->cap);
+    }
+    if (!p->writing && !A->rows)
+        A->n = A->cap = 0; /* what ns_bsm_free walks */
+    return p->failed ? -1 : 0;
 }

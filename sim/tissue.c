@@ -4,6 +4,7 @@
 
 #include "err.h"
 #include "ns_config.h"
+#include "snapshot.h"
 #include "svd3.h"
 
 #include <limits.h>
@@ -521,8 +522,10 @@ static int partition(NsTissue *t, int parts)
         t->part_tets = pt;
     size_t ncol = (size_t)(t->K.n > nn ? t->K.n : nn);
     int *cp = realloc(t->colpos, (size_t)parts * (ncol > 0 ? ncol : 1) * sizeof(int));
-    if (cp)
+    if (cp) {
         t->colpos = cp;
+        t->colpos_len = (size_t)parts * (ncol > 0 ? ncol : 1);
+    }
     int *part = malloc((size_t)(nn > 0 ? nn : 1) * sizeof(int));
     if (!ns || !ts || !nx || !pn || !pt || !cp || !part) {
         free(part);
@@ -1385,4 +1388,89 @@ uint64_t ns_tissue_state_hash(const NsTissue *t)
         }
     }
     return h;
+}
+
+/* The work partition's arrays when there is a partition; after a failed one (part_count 0) their
+ * sizes are unknown and nothing reads them: packed as absent, the next partition allocates. */
+static void partition_pack(NsPack *p, NsTissue *t)
+{
+    int has = t->part_count > 0;
+    size_t pc = has ? (size_t)t->part_count : 0;
+    size_t nn = t->part_node_slots > 0 ? (size_t)t->part_node_slots : 1;
+    size_t nt = t->part_tet_slots > 0 ? (size_t)t->part_tet_slots : 1;
+    int *ns = has ? t->part_node_start : NULL, *ts = has ? t->part_tet_start : NULL;
+    int *pn = has ? t->part_nodes : NULL, *pt = has ? t->part_tets : NULL;
+    int *nx = has ? t->part_next : NULL;
+    NS_PACK_ARRAY(p, ns, pc + 1, pc + 1);
+    NS_PACK_ARRAY(p, ts, pc + 1, pc + 1);
+    NS_PACK_ARRAY(p, nx, 2 * pc, 2 * pc);
+    NS_PACK_ARRAY(p, pn, ns ? (size_t)ns[pc] : 0, nn);
+    NS_PACK_ARRAY(p, pt, ts ? (size_t)ts[pc] : 0, nt);
+    if (!p->writing) {
+        t->part_node_start = ns;
+        t->part_tet_start = ts;
+        t->part_next = nx;
+        t->part_nodes = pn;
+        t->part_tets = pt;
+    }
+    size_t np = (size_t)t->node_part_cap;
+    NS_PACK_ARRAY(p, t->node_part, np, np);
+    NS_PACK_ARRAY(p, t->colpos, t->colpos_len, t->colpos_len);
+}
+
+static void tissue_blank(void *e)
+{
+    NsTissue *h = e;
+    memset(&h->mesh, 0, sizeof h->mesh);
+    memset(&h->K, 0, sizeof h->K);
+    memset(&h->D, 0, sizeof h->D);
+    memset(&h->A, 0, sizeof h->A);
+    h->materials = NULL;
+    h->rest = NULL;
+    h->frame = h->jframe = NULL;
+    h->jprod = h->jprod_old = h->djac = h->tet_force = h->tet_jac = NULL;
+    h->mass = h->force = h->work = NULL;
+    h->jvalid = h->jnew = h->dof_fixed = h->was_alive = h->a_valid = NULL;
+    h->djac_slot = h->rest_region = NULL;
+    h->part_node_start = h->part_nodes = h->part_tet_start = h->part_tets = NULL;
+    h->part_next = h->node_part = h->colpos = NULL;
+}
+
+/* Every array of NsTissue in the allocation its code makes (tet_cap, node_cap, djac_cap, the
+ * partition's), the mesh, K, D and A. Per-tet arrays are written up to the mesh's tet_slots: the
+ * rest is zero from their growth and stays so until the mesh grows into it. Per-node arrays are
+ * written whole (dof_fixed's tail is 1), and so are djac and the scratch. */
+int ns_tissue_pack(NsPack *p, NsTissue *t)
+{
+    ns_pack_struct(p, "TISS", t, sizeof *t, tissue_blank);
+    ns_mesh_pack(p, &t->mesh);
+    size_t tc = t->tet_cap > 0 ? (size_t)t->tet_cap : 0, nc = (size_t)t->node_cap;
+    size_t ts = t->mesh.tet_slots > 0 ? (size_t)t->mesh.tet_slots : 0;
+    if (ts > tc)
+        ts = tc;
+    size_t mc = (size_t)t->material_count, dc = (size_t)t->djac_cap;
+    NS_PACK_ARRAY(p, t->materials, mc, mc);
+    NS_PACK_ARRAY(p, t->rest, ts, tc);
+    NS_PACK_ARRAY(p, t->frame, ts, tc);
+    NS_PACK_ARRAY(p, t->jframe, ts, tc);
+    NS_PACK_ARRAY(p, t->jprod, 9 * ts, 9 * tc);
+    NS_PACK_ARRAY(p, t->jvalid, ts, tc);
+    NS_PACK_ARRAY(p, t->jnew, ts, tc);
+    NS_PACK_ARRAY(p, t->djac, 288 * dc, 288 * dc);
+    NS_PACK_ARRAY(p, t->djac_slot, ts, tc);
+    NS_PACK_ARRAY(p, t->jprod_old, 9 * ts, 9 * tc);
+    NS_PACK_ARRAY(p, t->tet_force, 12 * ts, 12 * tc);
+    NS_PACK_ARRAY(p, t->tet_jac, 288 * ts, 288 * tc);
+    NS_PACK_ARRAY(p, t->rest_region, ts, tc);
+    NS_PACK_ARRAY(p, t->mass, nc, nc);
+    NS_PACK_ARRAY(p, t->force, 3 * nc, 3 * nc);
+    NS_PACK_ARRAY(p, t->dof_fixed, 3 * nc, 3 * nc);
+    NS_PACK_ARRAY(p, t->work, 12 * nc, 12 * nc);
+    NS_PACK_ARRAY(p, t->was_alive, nc, nc);
+    NS_PACK_ARRAY(p, t->a_valid, nc, nc);
+    partition_pack(p, t);
+    ns_block_matrix_pack(p, &t->K);
+    ns_block_matrix_pack(p, &t->D);
+    ns_block_matrix_pack(p, &t->A);
+    return p->failed ? -1 : 0;
 }

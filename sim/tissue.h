@@ -9,6 +9,7 @@
 #ifndef NS_TISSUE_H
 #define NS_TISSUE_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "fem.h"
@@ -125,7 +126,8 @@ typedef struct NsTissue {
     int *node_part;       /* (node_part_cap) the part of each node slot at the last partition */
     int node_part_cap;
     int part_metis_age; /* partitions since METIS last ran (the others are patched) */
-    int *colpos; /* (part_count x node_slots) per-thread scratch for the row gather, all -1 */
+    int *colpos;       /* (part_count x node_slots) per-thread scratch for the row gather, all -1 */
+    size_t colpos_len; /* entries allocated in colpos */
 } NsTissue;
 
 /* Takes a copy of mesh. materials[r] is used for tets of region r. Nodes flagged
