@@ -1,7 +1,8 @@
 /* needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--compare NAME]
- *                              [--repeat N] [--json]
+ *                              [--repeat N] [--json] [--snapshot]
  * The run's loop for a number of steps with the stage timings (the paper's Tables 2 and 3);
- * with --compare, both solvers in one process. */
+ * with --compare, both solvers in one process; with --snapshot, the cost of snapshotting the
+ * world (sim/snapshot.h). */
 #include "commands.h"
 #include <errno.h>
 #include <lauxlib.h>
@@ -19,6 +20,7 @@
 #include "coupling.h"
 #include "err.h"
 #include "json.h"
+#include "snapshot.h"
 #include "names.h"
 #include "needle_path.h"
 #include "ns_config.h"
@@ -33,7 +35,8 @@
 
 static const char bench_usage[] =
     "usage: needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N]\n"
-    "                       [--set KEY=VALUE]... [--compare NAME] [--repeat N] [--json]\n";
+    "                       [--set KEY=VALUE]... [--compare NAME] [--repeat N] [--json]\n"
+    "                       [--snapshot]\n";
 
 #define BENCH_MAX_REPEAT 100
 
@@ -156,6 +159,7 @@ static double tip_difference(const NsRun *a, const NsRun *b, long *steps)
 /* What bench's command line asks beyond a run's options. */
 typedef struct BenchArgs {
     bool json;
+    bool snapshot; /* --snapshot: measure the world's in-memory snapshot and restore at the end */
     int compare; /* the solver to compare with, or -1 */
     int repeat;
 } BenchArgs;
@@ -165,6 +169,7 @@ typedef struct BenchArgs {
 static int parse_bench(int argc, char **argv, NsRunOpts *o, BenchArgs *b)
 {
     b->json = false;
+    b->snapshot = false;
     b->compare = -1;
     b->repeat = 1;
     for (int i = 1; i < argc; i++) {
@@ -175,6 +180,8 @@ static int parse_bench(int argc, char **argv, NsRunOpts *o, BenchArgs *b)
             return 0; /* --help */
         } else if (strcmp(a, "--json") == 0) {
             b->json = true;
+        } else if (strcmp(a, "--snapshot") == 0) {
+            b->snapshot = true;
         } else if (strcmp(a, "--steps") == 0 || strcmp(a, "--threads") == 0 ||
                    strcmp(a, "--solver") == 0 || strcmp(a, "--set") == 0 ||
                    strcmp(a, "--compare") == 0 || strcmp(a, "--repeat") == 0) {
@@ -249,6 +256,62 @@ static int parse_bench(int argc, char **argv, NsRunOpts *o, BenchArgs *b)
     return -1;
 }
 
+/* --snapshot: the cost of an in-memory snapshot of the world at the run's end and of restoring
+ * it (sim/snapshot.h; what a planner pays per rollout), medians of SNAPSHOT_REPEAT of each; a
+ * restored world must snapshot to the same bytes. */
+#define SNAPSHOT_REPEAT 9
+typedef struct SnapshotCost {
+    double bytes, snapshot_ms, restore_ms;
+    bool same;
+} SnapshotCost;
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static int snapshot_cost(NsRun *r, SnapshotCost *out, char *err, int err_sz)
+{
+    double ts[SNAPSHOT_REPEAT], tr[SNAPSHOT_REPEAT];
+    NsWorldSnapshot s = {0};
+    out->same = true;
+    for (int k = 0; k < SNAPSHOT_REPEAT; k++) {
+        ns_world_snapshot_free(&s);
+        double t0 = ns_wall_s();
+        if (ns_world_snapshot(&r->tissue, &r->rod, &r->c, &s, err, err_sz))
+            return -1;
+        double t1 = ns_wall_s();
+        NsTissue t;
+        NsRod rod;
+        NsCoupled c;
+        int rc = ns_world_restore(&s, &t, &rod, &c, err, err_sz);
+        double t2 = ns_wall_s();
+        NsWorldSnapshot again = {0};
+        if (rc == 0 && k == 0) { /* the restored world is the same world */
+            rc = ns_world_snapshot(&t, &rod, &c, &again, err, err_sz);
+            out->same = rc == 0 && again.len == s.len && memcmp(again.bytes, s.bytes, s.len) == 0;
+            ns_world_snapshot_free(&again);
+        }
+        ns_coupled_free(&c);
+        ns_rod_free(&rod);
+        ns_tissue_free(&t);
+        if (rc) {
+            ns_world_snapshot_free(&s);
+            return -1;
+        }
+        ts[k] = 1e3 * (t1 - t0);
+        tr[k] = 1e3 * (t2 - t1);
+    }
+    out->bytes = (double)s.len;
+    ns_world_snapshot_free(&s);
+    qsort(ts, SNAPSHOT_REPEAT, sizeof *ts, cmp_double);
+    qsort(tr, SNAPSHOT_REPEAT, sizeof *tr, cmp_double);
+    out->snapshot_ms = ts[SNAPSHOT_REPEAT / 2];
+    out->restore_ms = tr[SNAPSHOT_REPEAT / 2];
+    return 0;
+}
+
 /* What bench prints: the last repeat's runs and the figures over the repeats. */
 typedef struct BenchOut {
     const NsRunOpts *o;
@@ -258,6 +321,7 @@ typedef struct BenchOut {
     bool agree;
     long compared;                  /* the steps compared in the last repeat */
     double rmed[4], rlo[4], rhi[4]; /* ours, compared, ratio, ratio of means */
+    const SnapshotCost *snap;       /* --snapshot, else NULL */
 } BenchOut;
 
 static void bench_print_json(const BenchOut *b)
@@ -311,6 +375,19 @@ static void bench_print_json(const BenchOut *b)
         }
         ns_json_end_object(&j);
     }
+    if (b->snap) {
+        ns_json_key(&j, "snapshot");
+        ns_json_begin_object(&j);
+        ns_json_key(&j, "bytes");
+        ns_json_number(&j, b->snap->bytes);
+        ns_json_key(&j, "snapshot_ms");
+        ns_json_number(&j, b->snap->snapshot_ms);
+        ns_json_key(&j, "restore_ms");
+        ns_json_number(&j, b->snap->restore_ms);
+        ns_json_key(&j, "restored_same");
+        ns_json_bool(&j, b->snap->same);
+        ns_json_end_object(&j);
+    }
     ns_json_end_object(&j);
     fputc('\n', stdout);
 }
@@ -343,6 +420,12 @@ static void bench_print_text(const BenchOut *b)
             printf("  speed-up %.2fx [%.2f, %.2f]; whole run (mean steps) %.2fx [%.2f, %.2f]\n",
                    b->rmed[2], b->rlo[2], b->rhi[2], b->rmed[3], b->rlo[3], b->rhi[3]);
     }
+    if (b->snap)
+        printf("\nworld snapshot at step %ld (in memory, medians of %d): %.1f MB, snapshot %.2f ms, "
+               "restore %.2f ms; the restored world %s\n",
+               b->runs[0].steps, SNAPSHOT_REPEAT, 1e-6 * b->snap->bytes, b->snap->snapshot_ms,
+               b->snap->restore_ms,
+               b->snap->same ? "snapshots to the same bytes" : "DIFFERS from the original");
 }
 
 int ns_cmd_bench(int argc, char **argv)
@@ -429,8 +512,16 @@ int ns_cmd_bench(int argc, char **argv)
         median_range(meds[k], done, &rmed[k], &rlo[k], &rhi[k]);
     median_range(ratios, done, &rmed[2], &rlo[2], &rhi[2]);
     median_range(ratios_mean, done, &rmed[3], &rlo[3], &rhi[3]);
+    SnapshotCost snap = {0};
+    if (args.snapshot && snapshot_cost(&runs[0], &snap, err, sizeof err)) {
+        fprintf(stderr, "needlesim bench: --snapshot: %s\n", err);
+        for (int k = 0; k < nruns; k++)
+            ns_run_free(&runs[k]);
+        return 1;
+    }
     BenchOut out = {&o,           runs, nruns, compare,  repeat, done, speedup,
-                    speedup_mean, diff, agree, compared, {0},    {0},  {0}};
+                    speedup_mean, diff, agree, compared, {0},    {0},  {0}, NULL};
+    out.snap = args.snapshot ? &snap : NULL;
     memcpy(out.rmed, rmed, sizeof rmed);
     memcpy(out.rlo, rlo, sizeof rlo);
     memcpy(out.rhi, rhi, sizeof rhi);
@@ -445,5 +536,5 @@ int ns_cmd_bench(int argc, char **argv)
                 1e3 * diff, runs[0].steps, runs[1].steps);
     for (int k = 0; k < nruns; k++)
         ns_run_free(&runs[k]);
-    return agree ? 0 : 1;
+    return agree && (!args.snapshot || snap.same) ? 0 : 1;
 }

@@ -51,7 +51,8 @@ static const char run_usage[] =
     "                     [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv]\n"
     "                     [--trainee ID] [--session ID] [--rescore]\n"
     "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
-    "                     [--height H] [--frame-every K] [--quiet]\n";
+    "                     [--height H] [--frame-every K] [--quiet]\n"
+    "                     [--checkpoint-at T FILE] [--resume FILE]\n";
 
 /* A bad command line: one line, the usage on --help (the one-line contract for bad input). */
 static int usage_error(const char *fmt, const char *arg)
@@ -115,6 +116,7 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
                 *(a[2] == 't' ? &o->trainee : &o->session) = v;
             } else if (strcmp(a, "--solver") == 0) {
                 o->solver = ns_coupled_solver_parse(v);
+                o->solver_given = true;
                 if (o->solver < 0)
                     return usage_error("--solver '%s': unknown solver (schur or paper)", v);
             } else {
@@ -124,7 +126,7 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
                 if (strcmp(a, "--steps") == 0)
                     o->steps = n;
                 else
-                    o->threads = (int)n;
+                    o->threads = (int)n, o->threads_given = true;
             }
         } else if (strcmp(a, "--video") == 0) {
             if (!v)
@@ -152,6 +154,23 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             else
                 o->height = (int)n;
             i++;
+        } else if (strcmp(a, "--checkpoint-at") == 0) {
+            if (!v || i + 2 >= argc)
+                return usage_error("%s needs a time [s] and a file", a);
+            char *end;
+            double t = strtod(v, &end);
+            if (*end || !(t > 0.0) || !(t <= NS_LIMIT_SIM_TIME_MAX))
+                return usage_error("--checkpoint-at '%s': expected a time in seconds, > 0", v);
+            if (!argv[i + 2][0])
+                return usage_error("%s: expected a path, got an empty string", a);
+            o->checkpoint_at = t;
+            o->checkpoint = argv[i + 2];
+            i += 2;
+        } else if (strcmp(a, "--resume") == 0) {
+            if (!v || !v[0])
+                return usage_error("%s needs a checkpoint file", a);
+            o->resume = v;
+            i++;
         } else if (strcmp(a, "--frames") == 0) {
             o->frames = true;
         } else if (strcmp(a, "--no-render") == 0) {
@@ -174,6 +193,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
         return usage_error("%s", "--rescore without --replay LOG.csv");
     if (o->record && o->replay && strcmp(o->record, o->replay) == 0)
         return usage_error("--record and --replay name the same file '%s'", o->record);
+    if (o->checkpoint && o->resume && strcmp(o->checkpoint, o->resume) == 0)
+        return usage_error("--checkpoint-at and --resume name the same file '%s'", o->checkpoint);
     if (o->no_render && (o->frames || o->video))
         return usage_error("%s", "--no-render with --frames or --video: which is it?");
     if (o->no_render && (o->width || o->height || o->frame_every))
@@ -301,37 +322,44 @@ static int canonical(const char *p, char *out, size_t n)
         snprintf(dir, sizeof dir, ".");
     if (!realpath(dir, real))
         return -1;
-    snprintf(out, n, "%s/%s", real, base);
-    return 0;
+    int k = snprintf(out, n, "%s/%s", real, base);
+    return k < 0 || (size_t)k >= n ? -1 : 0; /* too long to compare: not resolved */
 }
 
-/* --record must not replace the run's inputs (the scenario, the replayed log) or its other
- * outputs (report.json, trajectory.csv, summary.png, the video): compared as files (device
- * and inode) where they exist, and as canonical paths. Returns 0 or a usage error (2). */
-static int check_record_path(const NsRunOpts *o)
+/* --record and --checkpoint-at must not replace the run's inputs (the scenario, the replayed
+ * log, the checkpoint resumed) or its other outputs (report.json, trajectory.csv, summary.png,
+ * the video, each other): compared as files (device and inode) where they exist, and as
+ * canonical paths. Returns 0 or a usage error (2). */
+static int check_out_path(const NsRunOpts *o, const char *out, const char *flag)
 {
-    if (!o->record)
+    if (!out)
         return 0;
+    char msg[200];
     struct stat rs, st;
-    bool exists = stat(o->record, &rs) == 0;
-    const char *inputs[2] = {o->scenario, o->replay};
-    for (int k = 0; k < 2; k++)
+    bool exists = stat(out, &rs) == 0;
+    const char *inputs[3] = {o->scenario, o->replay, o->resume};
+    for (int k = 0; k < 3; k++)
         if (inputs[k] && exists && stat(inputs[k], &st) == 0 && st.st_dev == rs.st_dev &&
-            st.st_ino == rs.st_ino)
-            return usage_error("--record '%s': that is the run's own input", o->record);
+            st.st_ino == rs.st_ino) {
+            snprintf(msg, sizeof msg, "%s '%%s': that is the run's own input", flag);
+            return usage_error(msg, out);
+        }
     char rec[PATH_MAX + 256], other[PATH_MAX + 256], path[PATH_MAX + 64];
-    if (canonical(o->record, rec, sizeof rec) != 0)
-        return 0; /* its folder does not exist: the log cannot be written, said later */
+    if (canonical(out, rec, sizeof rec) != 0)
+        return 0; /* its folder does not exist: the file cannot be written, said later */
     static const char *const outs[4] = {"report.json", "trajectory.csv", "summary.png", "frames"};
-    for (int k = 0; k < 5; k++) {
+    const char *files[2] = {o->video, out == o->record ? o->checkpoint : o->record};
+    for (int k = 0; k < 6; k++) {
         if (k < 4)
             snprintf(path, sizeof path, "%s/%s", o->out_dir, outs[k]);
-        else if (o->video)
-            snprintf(path, sizeof path, "%s", o->video);
+        else if (files[k - 4])
+            snprintf(path, sizeof path, "%s", files[k - 4]);
         else
             continue;
-        if (canonical(path, other, sizeof other) == 0 && strcmp(rec, other) == 0)
-            return usage_error("--record '%s': that is another output of the run", o->record);
+        if (canonical(path, other, sizeof other) == 0 && strcmp(rec, other) == 0) {
+            snprintf(msg, sizeof msg, "%s '%%s': that is another output of the run", flag);
+            return usage_error(msg, out);
+        }
     }
     return 0;
 }
@@ -347,12 +375,17 @@ int ns_cmd_run(int argc, char **argv)
     char err[1024] = "";
     ns_cleanup_install();
     int rc = ns_run_outputs_prepare(&r, err, sizeof err) ? -2 : -1;
-    /* --record checked once -o's folder exists (it may be inside it). */
-    if (rc == -1 && check_record_path(&r.opt)) {
+    /* --record and the checkpoint checked once -o's folder exists (they may be inside it). */
+    if (rc == -1 && (check_out_path(&r.opt, r.opt.record, "--record") ||
+                     check_out_path(&r.opt, r.opt.checkpoint, "--checkpoint-at"))) {
         ns_run_outputs_remove(&r);
         ns_run_free(&r);
         return 2;
     }
+    /* --resume: the checkpoint's settings are the run's (before the scenario is loaded). */
+    if (rc == -1 && r.opt.resume && ns_run_checkpoint_open(&r, err, sizeof err))
+        rc = -2;
+    r.keep_views = r.opt.checkpoint && !r.opt.replay;
     if (rc == -1 && ns_run_load(&r, err, sizeof err) == 0)
         rc = 0;
     rc = rc ? rc : open_logs(&r, err, sizeof err);

@@ -414,7 +414,8 @@ int ns_run_begin(NsRun *r, char *err, int err_sz)
     r->more = 1;
     r->needles = 1;
     r->t0 = ns_wall_s();
-    if (r->rendering && (r->opt.frames || r->opt.video) &&
+    /* (a resumed run's first frame is of the checkpoint's world: ns_run_checkpoint_resume) */
+    if (r->rendering && (r->opt.frames || r->opt.video) && !r->opt.resume &&
         ns_run_render_now(r, NULL, false, NULL, err, err_sz))
         return -1;
     return 0;
@@ -566,7 +567,7 @@ int ns_run_tick(NsRun *r, const NsControl *given, char *err, int err_sz)
     /* The script ended at this tick: nothing of it is applied, recorded or stepped. */
     if ((r->max_steps == 0 || r->stop_when_done) && !r->more)
         return 0;
-    if (run_step(r, ctl, t, err, err_sz))
+    if (run_step(r, ctl, t, err, err_sz) || ns_run_checkpoint_maybe(r, err, err_sz))
         return -1;
     if (r->tty && (r->steps % 10 == 0)) {
         progress(r, r->max_steps, (double)r->steps * sp->dt);
@@ -587,7 +588,7 @@ void ns_run_finish(NsRun *r)
 
 int ns_run_loop(NsRun *r, char *err, int err_sz)
 {
-    if (ns_run_begin(r, err, err_sz))
+    if (ns_run_begin(r, err, err_sz) || (r->opt.resume && ns_run_checkpoint_resume(r, err, err_sz)))
         return -1;
     int rc;
     while ((rc = ns_run_tick(r, NULL, err, err_sz)) > 0)
@@ -595,6 +596,11 @@ int ns_run_loop(NsRun *r, char *err, int err_sz)
     if (rc < 0)
         return -1;
     ns_run_finish(r);
+    if (r->opt.checkpoint && !r->checkpointed) {
+        ns_set_err(err, err_sz, "%s: the run ended at t = %g s, before --checkpoint-at %g s",
+                   r->opt.checkpoint, (double)r->steps * r->spec.dt, r->opt.checkpoint_at);
+        return -1;
+    }
     return 0;
 }
 
@@ -680,4 +686,7 @@ void ns_run_free(NsRun *r)
     free(r->report_tmp);
     free(r->rec_tmp);
     ns_control_log_free(&r->replay);
+    free(r->views);
+    free(r->view_tx);
+    ns_run_checkpoint_free(r);
 }

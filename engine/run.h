@@ -34,7 +34,21 @@ typedef struct NsRunOpts {
     bool no_render, frames;
     const char *video;
     int width, height, frame_every; /* frame_every 0: the scenario's camera decides */
+    /* checkpoints (docs/checkpoints.md): --checkpoint-at T FILE, --resume FILE */
+    const char *checkpoint, *resume;
+    double checkpoint_at;
+    bool threads_given, solver_given;
 } NsRunOpts;
+
+/* What a script saw of the simulation at one tick (the `sim` table's fields) and what it set:
+ * a run that writes a checkpoint keeps one per tick, so that a resumed run can bring a fresh
+ * script to the same point by running it again against them (engine/run_checkpoint.c). */
+typedef struct NsTickView {
+    double depth, tip[3], axial, tip_dir[3], bevel_dir[3];
+    int fr[3], cutting, seeds, exited, bone_contact, tip_exited, events;
+    int more;      /* the script had more to do after the tick */
+    NsControl ctl; /* the controls it set */
+} NsTickView;
 
 /* ---- the model ---- */
 
@@ -113,6 +127,16 @@ typedef struct NsRun {
     double end_s;     /* the run's end: last frame, contact sheet, video closed [s] */
     NsSeries tips[3]; /* bench --compare: the tip after every step [m] */
     bool log_tips;
+    /* checkpoints: the views of every script tick so far (keep_views), the targets' positions
+     * they showed (target_count x 3 per view), the trajectory's size after its header */
+    bool keep_views, checkpointed;
+    NsTickView *views;
+    double *view_tx;
+    long view_n, view_cap;
+    long traj_start;
+    FILE *resume_f; /* --resume: the checkpoint, read in two parts (header, then the rest) */
+    struct NsPack *resume_pack;
+    struct NsCheckpointHeader *resume_hdr;
 } NsRun;
 
 enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT };
@@ -166,6 +190,18 @@ void ns_run_free(NsRun *r);
 int ns_run_script_start(NsRun *r, char *err, int err_sz);
 int ns_run_script_tick(NsRun *r, double t, int exited, int *more, NsControl *ctl, char *err,
                        int err_sz);
+int ns_run_script_replay_tick(NsRun *r, long k, char *err, int err_sz);
+/* engine/run_checkpoint.c: checkpoints (docs/checkpoints.md) */
+int ns_run_views_push(NsRun *r, const NsTickView *v, const double *tx);
+/* --resume: reads the checkpoint's header and takes the run's settings from it (--set, --steps,
+ * --threads, --solver; given ones must agree). Before ns_run_load. */
+int ns_run_checkpoint_open(NsRun *r, char *err, int err_sz);
+/* --resume, after ns_run_begin: the world, the run's state and its script brought to the
+ * checkpoint's step. */
+int ns_run_checkpoint_resume(NsRun *r, char *err, int err_sz);
+/* --checkpoint-at: after each step; writes the checkpoint at the first step at or after T. */
+int ns_run_checkpoint_maybe(NsRun *r, char *err, int err_sz);
+void ns_run_checkpoint_free(NsRun *r);
 /* engine/run_output.c: the output folder, the trajectory, the temporary files */
 char *ns_run_path_join(const char *dir, const char *name);
 int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz);

@@ -141,6 +141,7 @@ void ns_run_traj_header(NsRun *r)
         fprintf(r->traj, ",%s_x_m,%s_y_m,%s_z_m", n, n, n);
     }
     fputc('\n', r->traj);
+    r->traj_start = ftell(r->traj);
 }
 
 void ns_run_outputs_remove(NsRun *r)

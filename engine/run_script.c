@@ -60,9 +60,12 @@ static int get_raw(lua_State *L, int idx, const char *key)
 typedef struct TickIO {
     NsRun *r;
     double t;
+    long step;
     int exited;
-    int more;      /* out: the script has more to do */
-    NsControl ctl; /* out: the controls for this step */
+    const NsTickView *view; /* a resumed run's replay: what the script saw then, else NULL */
+    const double *view_tx;  /* ... and the targets it saw (3 per target) */
+    int more;               /* out: the script has more to do */
+    NsControl ctl;          /* out: the controls for this step */
 } TickIO;
 
 /* (io) -> (): makes `sim`, loads needlesim.actions through the runtime's own require (kept in
@@ -145,47 +148,74 @@ static void raise_script_error(lua_State *L, lua_State *co, const char *scenario
     lua_error(L);
 }
 
-/* Updates `sim` (at stack index si) for the tick: time, tip, forces, friction, events, the
- * targets where the tissue has carried them. */
-static void fill_sim(lua_State *L, TickIO *io, int si)
+/* What the script sees of the simulation at a tick (`sim`'s fields), taken from the run
+ * (targets: r->spec.target_count positions into tx, 3 each). */
+static void view_of_run(lua_State *L, TickIO *io, NsTickView *v, double *tx)
+{
+    NsRun *r = io->r;
+    memset(v, 0, sizeof *v);
+    v->depth = ns_run_depth(r);
+    memcpy(v->tip, ns_run_tip(r), sizeof v->tip);
+    v->axial = r->last_axial;
+    double m1[3];
+    ns_rod_tip_frame(&r->rod, v->tip_dir, m1, v->bevel_dir);
+    memcpy(v->fr, r->last_fr, sizeof v->fr);
+    v->cutting = r->last_cutting;
+    v->seeds = r->seed_n;
+    v->exited = io->exited;
+    v->bone_contact = r->c.tip_blocked;
+    v->tip_exited = r->c.params.remesh && r->c.path.through && !r->c.outside;
+    v->events = r->event_n;
+    for (int i = 0; i < r->spec.target_count; i++) {
+        /* A copy of the hint: the search the score makes at the end must not depend on
+         * whether a script looked at the targets (a replay does not), or the score could
+         * differ in its last bits between a run and its replay. */
+        int hint = r->target_hint[i];
+        if (ns_run_world_of(&r->tissue.mesh, r->spec.targets[i].at, &hint, tx + 3 * i) != 0)
+            luaL_error(L, "needlesim: target '%s' could not be located in the tissue",
+                       r->spec.targets[i].name);
+    }
+}
+
+/* Updates `sim` (at stack index si) for the tick from the view v: time, tip, forces, friction,
+ * events, the targets where the tissue has carried them (tx). */
+static void fill_sim(lua_State *L, TickIO *io, int si, const NsTickView *v, const double *tx)
 {
     NsRun *r = io->r;
     set_num(L, si, "t", io->t);
     set_num(L, si, "dt", r->spec.dt);
     lua_pushstring(L, "step");
-    lua_pushinteger(L, r->steps);
+    lua_pushinteger(L, io->step);
     lua_rawset(L, si);
-    set_num(L, si, "depth", ns_run_depth(r));
-    set_vec(L, si, "tip", ns_run_tip(r));
-    set_num(L, si, "axial_force", r->last_axial);
-    double tt[3], m1[3], m2[3];
-    ns_rod_tip_frame(&r->rod, tt, m1, m2);
-    set_vec(L, si, "tip_direction", tt);
-    set_vec(L, si, "bevel_direction", m2);
+    set_num(L, si, "depth", v->depth);
+    set_vec(L, si, "tip", v->tip);
+    set_num(L, si, "axial_force", v->axial);
+    set_vec(L, si, "tip_direction", v->tip_dir);
+    set_vec(L, si, "bevel_direction", v->bevel_dir);
     lua_pushstring(L, "friction"); /* coupling nodes per friction state, last step */
     lua_createtable(L, 0, 4);
-    set_num(L, lua_gettop(L), "sticking", r->last_fr[0]);
-    set_num(L, lua_gettop(L), "sliding_in", r->last_fr[1]);
-    set_num(L, lua_gettop(L), "sliding_out", r->last_fr[2]);
+    set_num(L, lua_gettop(L), "sticking", v->fr[0]);
+    set_num(L, lua_gettop(L), "sliding_in", v->fr[1]);
+    set_num(L, lua_gettop(L), "sliding_out", v->fr[2]);
     lua_pushstring(L, "cutting");
-    lua_pushboolean(L, r->last_cutting);
+    lua_pushboolean(L, v->cutting);
     lua_rawset(L, -3);
     lua_rawset(L, si);
     lua_pushstring(L, "seeds_dropped");
-    lua_pushinteger(L, r->seed_n);
+    lua_pushinteger(L, v->seeds);
     lua_rawset(L, si);
     lua_pushstring(L, "exited");
-    lua_pushboolean(L, io->exited);
+    lua_pushboolean(L, v->exited);
     lua_rawset(L, si);
     lua_pushstring(L, "bone_contact"); /* the tip rests on bone: the insertion stalls */
-    lua_pushboolean(L, r->c.tip_blocked);
+    lua_pushboolean(L, v->bone_contact);
     lua_rawset(L, si);
     lua_pushstring(L, "tip_exited"); /* the tip is out through the tissue's surface */
-    lua_pushboolean(L, r->c.params.remesh && r->c.path.through && !r->c.outside);
+    lua_pushboolean(L, v->tip_exited);
     lua_rawset(L, si);
     lua_pushstring(L, "events"); /* a fresh list every step: {t, type, tip, region} */
-    lua_createtable(L, r->event_n, 0);
-    for (int i = 0; i < r->event_n; i++) {
+    lua_createtable(L, v->events, 0);
+    for (int i = 0; i < v->events && i < r->event_n; i++) {
         const struct Event *e = &r->events[i];
         lua_createtable(L, 0, 4);
         set_num(L, lua_gettop(L), "t", e->t);
@@ -201,17 +231,8 @@ static void fill_sim(lua_State *L, TickIO *io, int si)
     lua_rawset(L, si);
     lua_pushstring(L, "targets"); /* a fresh table every step */
     lua_newtable(L);
-    for (int i = 0; i < r->spec.target_count; i++) {
-        /* A copy of the hint: the search the score makes at the end must not depend on
-         * whether a script looked at the targets (a replay does not), or the score could
-         * differ in its last bits between a run and its replay. */
-        double x[3];
-        int hint = r->target_hint[i];
-        if (ns_run_world_of(&r->tissue.mesh, r->spec.targets[i].at, &hint, x) != 0)
-            luaL_error(L, "needlesim: target '%s' could not be located in the tissue",
-                       r->spec.targets[i].name);
-        set_vec(L, lua_gettop(L), r->spec.targets[i].name, x);
-    }
+    for (int i = 0; i < r->spec.target_count; i++)
+        set_vec(L, lua_gettop(L), r->spec.targets[i].name, tx + 3 * i);
     lua_rawset(L, si);
 }
 
@@ -336,7 +357,17 @@ static int tick_body(lua_State *L)
     NsRun *r = io->r;
     lua_rawgeti(L, LUA_REGISTRYINDEX, r->sim_ref);
     int si = lua_gettop(L);
-    fill_sim(L, io, si);
+    if (io->view) {
+        fill_sim(L, io, si, io->view, io->view_tx);
+    } else {
+        NsTickView v;
+        double *tx = lua_newuserdatauv(L, sizeof(double) * 3 * (size_t)(r->spec.target_count + 1), 0);
+        view_of_run(L, io, &v, tx);
+        fill_sim(L, io, si, &v, tx);
+        lua_pop(L, 1);
+        if (r->keep_views && ns_run_views_push(r, &v, tx) != 0)
+            return luaL_error(L, "needlesim: out of memory");
+    }
     resume_script(L, io);
     lua_pushstring(L, "control");
     if (lua_rawget(L, si) != LUA_TTABLE)
@@ -362,11 +393,51 @@ int ns_run_script_tick(NsRun *r, double t, int exited, int *more, NsControl *ctl
                        int err_sz)
 {
     lua_State *L = ns_lua_state(r->sc.lua);
-    TickIO io = {.r = r, .t = t, .exited = exited};
+    TickIO io = {.r = r, .t = t, .step = r->steps, .exited = exited};
     lua_pushcfunction(L, tick_body);
     lua_pushlightuserdata(L, &io);
     int rc = ns_lua_call(r->sc.lua, 1, 0, err, err_sz);
     *more = io.more;
     *ctl = io.ctl;
+    if (rc == 0 && r->keep_views) { /* the view taken above gets what the script set */
+        NsTickView *v = &r->views[r->view_n - 1];
+        v->more = io.more;
+        v->ctl = io.ctl;
+    }
     return rc;
+}
+
+static bool entry_same(const NsEntry *a, const NsEntry *b)
+{
+    return memcmp(a->point, b->point, sizeof a->point) == 0 &&
+           memcmp(a->direction, b->direction, sizeof a->direction) == 0 &&
+           memcmp(a->bevel_toward, b->bevel_toward, sizeof a->bevel_toward) == 0 &&
+           a->has_bevel_toward == b->has_bevel_toward;
+}
+
+int ns_run_script_replay_tick(NsRun *r, long k, char *err, int err_sz)
+{
+    lua_State *L = ns_lua_state(r->sc.lua);
+    const NsTickView *v = &r->views[k];
+    TickIO io = {.r = r,
+                 .t = (double)k * r->spec.dt,
+                 .step = k,
+                 .exited = v->exited,
+                 .view = v,
+                 .view_tx = r->view_tx + 3 * (size_t)r->spec.target_count * (size_t)k};
+    lua_pushcfunction(L, tick_body);
+    lua_pushlightuserdata(L, &io);
+    if (ns_lua_call(r->sc.lua, 1, 0, err, err_sz) != 0)
+        return -1;
+    const NsControl *a = &v->ctl, *b = &io.ctl;
+    bool same = io.more == v->more && a->v_insert == b->v_insert &&
+                a->twist_rate == b->twist_rate && memcmp(a->v_base, b->v_base, sizeof a->v_base) == 0 &&
+                a->drop_seed == b->drop_seed && a->next_needle == b->next_needle &&
+                (!a->next_needle || entry_same(&a->entry, &b->entry));
+    if (!same)
+        ns_set_err(err, err_sz,
+                   "%s: the script did not repeat its course at step %ld of the checkpoint (does "
+                   "it depend on something besides `sim`?)",
+                   r->sc.path, k);
+    return same ? 0 : -1;
 }
