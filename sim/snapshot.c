@@ -135,6 +135,23 @@ int ns_pack_array(NsPack *p, void **ptr, size_t elem, size_t count, size_t cap)
     return ns_pack_bytes(p, a, (size_t)hdr[1] * elem);
 }
 
+void *ns_pack_object(NsPack *p, void **obj, size_t size, const char *what)
+{
+    uint8_t present = *obj != NULL;
+    if (ns_pack_bytes(p, &present, 1) != 0 || p->writing)
+        return p->failed ? NULL : *obj;
+    *obj = NULL;
+    if (present > 1)
+        ns_pack_fail(p, "%s: bad header at byte %zu", what, p->pos - 1);
+    else if (present && size > NS_PACK_MAX_BYTES - p->allocated)
+        ns_pack_fail(p, "%s: more than %zu GiB in all", what, NS_PACK_MAX_BYTES >> 30);
+    else if (present && !(*obj = calloc(1, size)))
+        ns_pack_fail(p, "%s: out of memory (%zu bytes)", what, size);
+    else
+        p->allocated += present ? size : 0;
+    return *obj;
+}
+
 int ns_pack_checksum(NsPack *p)
 {
     uint64_t sum = p->sum;

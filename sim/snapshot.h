@@ -48,6 +48,10 @@ int ns_pack_bytes(NsPack *p, void *data, size_t n);
  * (cap >= count; a reader allocates cap, zeroed, and reads count; *ptr NULL is packed as NULL).
  * Returns 0 or -1. */
 int ns_pack_array(NsPack *p, void **ptr, size_t elem, size_t count, size_t cap);
+/* An owned structure at *obj (NULL allowed): whether there is one, written or read; a reader
+ * allocates it (size bytes, zeroed) for its fields to be read into (what: its name in the
+ * messages). Returns the structure, or NULL (none, or a failure). */
+void *ns_pack_object(NsPack *p, void **obj, size_t size, const char *what);
 /* The failure "what: detail" (the first one sticks); returns -1. */
 int ns_pack_fail(NsPack *p, const char *fmt, ...)
 #if defined(__GNUC__)
