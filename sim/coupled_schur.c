@@ -1405,8 +1405,9 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
 
 /* Every pointer of w NULL: the copy a writer writes, and a read structure before its arrays
  * are read. */
-static void schur_forget(CoupledSchur *w)
+static void schur_forget(void *obj)
 {
+    CoupledSchur *w = obj;
     w->fac = NULL;
     w->fixed = NULL;
     w->slot = w->node = w->act = w->job_node = w->yi = w->yn = w->yplace = NULL;
@@ -1460,16 +1461,9 @@ static void schur_pack(NsPack *p, CoupledSchur *w)
         ns_pack_fail(p, "schur: written by another build (%u bytes, here %zu)", size, sizeof *w);
     double **views[7] = {&w->Zn, &w->C, &w->L, &w->Cp, &w->Lp, &w->sc, &w->small};
     int64_t at[7]; /* their offsets in buf, -1: NULL */
-    if (p->writing) {
-        for (int k = 0; k < 7; k++)
-            at[k] = *views[k] ? *views[k] - w->buf : -1;
-        CoupledSchur h = *w;
-        schur_forget(&h);
-        NS_PACK(p, h);
-    } else {
-        NS_PACK(p, *w);
-        schur_forget(w);
-    }
+    for (int k = 0; k < 7 && p->writing; k++)
+        at[k] = *views[k] ? *views[k] - w->buf : -1;
+    ns_pack_scalars(p, w, sizeof *w, schur_forget);
     NS_PACK(p, at);
     ns_solver_pack(p, &w->fac); /* first: waits for the job that writes job_Z */
     schur_pack_arrays(p, w);

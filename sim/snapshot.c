@@ -152,6 +152,23 @@ void *ns_pack_object(NsPack *p, void **obj, size_t size, const char *what)
     return *obj;
 }
 
+int ns_pack_scalars(NsPack *p, void *obj, size_t size, void (*forget)(void *))
+{
+    if (!p->writing) {
+        ns_pack_bytes(p, obj, size);
+        forget(obj);
+        return p->failed ? -1 : 0;
+    }
+    void *copy = malloc(size ? size : 1);
+    if (!copy)
+        return ns_pack_fail(p, "out of memory (%zu bytes)", size);
+    memcpy(copy, obj, size);
+    forget(copy);
+    int rc = ns_pack_bytes(p, copy, size);
+    free(copy);
+    return rc;
+}
+
 int ns_pack_checksum(NsPack *p)
 {
     uint64_t sum = p->sum;

@@ -1274,8 +1274,9 @@ typedef struct SolverLinks {
 
 /* Every pointer of s NULL, its commons and thread zeroed: the copy a writer writes, and a read
  * solver before its arrays are read (its bytes carried stale addresses). */
-static void solver_forget(NsSolver *s)
+static void solver_forget(void *obj)
 {
+    NsSolver *s = obj;
     RefreshJob *j = &s->job;
     memset(&s->cm, 0, sizeof s->cm);
     memset(&j->cm, 0, sizeof j->cm);
@@ -1346,9 +1347,7 @@ static void *pack_cm_object(NsPack *p, void **obj, void *h, size_t size, void (*
         return NULL;
     if (p->writing)
         memcpy(h, *obj, size);
-    forget(h);
-    ns_pack_bytes(p, h, size);
-    forget(h);
+    ns_pack_scalars(p, h, size, forget);
     if (p->writing)
         return *obj;
     if (!p->failed && (present != 1 || !cm))
@@ -1522,13 +1521,8 @@ static void solver_pack(NsPack *p, NsSolver *s)
     if (p->writing) {
         job_join(s); /* its factor is held as made, adopted later as it would have been */
         ln = links_of(p, s);
-        NsSolver h = *s;
-        solver_forget(&h);
-        NS_PACK(p, h);
-    } else {
-        NS_PACK(p, *s);
-        solver_forget(s);
     }
+    ns_pack_scalars(p, s, sizeof *s, solver_forget);
     NS_PACK(p, ln);
     RefreshJob *j = &s->job;
     if (!p->writing && !p->failed) {
