@@ -69,6 +69,7 @@ struct CoupledSchur {
     int pending;
     int *job_node, job_count, job_cap;
     double *job_B, *job_Z;
+    size_t job_len; /* doubles in each (of the last scheduling that allocated both) */
     /* The projection in the middle (docs/coupling.md): for cached slot s and direction d, column
      * j = 3 s + d, Y_j = L_f^-1 P e_(3 node + d) with the factor's single-precision copy L_f as
      * it is now (its trailing block made current every step), in the copy's numbering. Below
@@ -311,6 +312,7 @@ static int schedule_refresh(CoupledSchur *w, const CoupledSystem *S)
     w->job_Z = malloc(((size_t)m * 3 * (size_t)nt3 + 1) * sizeof *w->job_Z);
     if (!w->job_B || !w->job_Z)
         return -1;
+    w->job_len = (size_t)m * 3 * (size_t)nt3 + 1;
     for (int i = 0; i < m; i++)
         for (int d = 0; d < 3; d++)
             w->job_B[(size_t)(3 * i + d) * (size_t)nt3 + 3 * (size_t)w->job_node[i] + d] = 1.0;
@@ -1392,15 +1394,101 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
     return rc;
 }
 
-/* ---- snapshots (sim/snapshot.h) ---- */
+/* ---- snapshots (sim/snapshot.h) ----
+ *
+ * Held: the scalars, the factor's solver (ns_solver_pack), the column cache, the scheduled
+ * refactorization's nodes and columns, the projection's caches (ydense whole: an entry that
+ * came out -0.0f stays so between uses). Scratch that every step writes before it reads it
+ * (buf, act, vec, term_col, term_s, yu, yplace) is held as room, not contents; the views into
+ * buf as offsets. fixed is read only while a factor is in use (fac_count), job_B and job_Z
+ * only while a refactorization is pending. */
 
-int coupled_schur_pack(NsPack *p, CoupledSchur **w)
+/* Every pointer of w NULL: the copy a writer writes, and a read structure before its arrays
+ * are read. */
+static void schur_forget(void *obj)
 {
-    uint8_t present = *w != NULL;
-    NS_PACK(p, present);
-    if (!p->writing)
-        *w = NULL;
-    if (present)
-        ns_pack_fail(p, "schur: snapshots of our solver's state are not implemented yet");
+    CoupledSchur *w = obj;
+    w->fac = NULL;
+    w->fixed = NULL;
+    w->slot = w->node = w->act = w->job_node = w->yi = w->yn = w->yplace = NULL;
+    w->cols = w->buf = w->vec = w->term_s = w->job_B = w->job_Z = w->yw = w->yu = NULL;
+    w->Zn = w->C = w->L = w->sc = w->small = w->Cp = w->Lp = NULL;
+    w->term_col = NULL;
+    w->yv = w->yt = w->ydense = NULL;
+    w->yp = NULL;
+}
+
+/* The arrays of w (malloc'd). */
+static void schur_pack_arrays(NsPack *p, CoupledSchur *w)
+{
+    uint8_t *fixed = w->fac_count ? w->fixed : NULL;
+    uint8_t has_fixed = fixed != NULL; /* (a reader's pointers are NULL yet) */
+    NS_PACK(p, has_fixed);
+    NS_PACK_ARRAY(p, fixed, has_fixed ? w->n3 : 0, has_fixed ? w->n3 + 1 : 0);
+    NS_PACK_ARRAY(p, w->slot, w->slot_cap, w->slot_cap);
+    NS_PACK_ARRAY(p, w->node, w->count, w->cap);
+    NS_PACK_ARRAY(p, w->cols, (size_t)w->count * 3 * (size_t)w->n3, w->cols_cap);
+    NS_PACK_ARRAY(p, w->buf, 0, w->buf_cap);
+    NS_PACK_ARRAY(p, w->act, 0, w->act_cap);
+    NS_PACK_ARRAY(p, w->vec, 0, w->vec_cap);
+    NS_PACK_ARRAY(p, w->term_col, 0, w->term_cap);
+    NS_PACK_ARRAY(p, w->term_s, 0, w->term_cap);
+    NS_PACK_ARRAY(p, w->job_node, w->job_count, w->job_cap);
+    double *jb = w->pending ? w->job_B : NULL, *jz = w->pending ? w->job_Z : NULL;
+    NS_PACK_ARRAY(p, jb, w->job_len, w->job_len);
+    NS_PACK_ARRAY(p, jz, w->job_len, w->job_len);
+    NS_PACK_ARRAY(p, w->yi, w->ylen, w->ycap);
+    NS_PACK_ARRAY(p, w->yv, w->ylen, w->ycap);
+    NS_PACK_ARRAY(p, w->yp, 3 * w->ycount, w->ycols_cap);
+    NS_PACK_ARRAY(p, w->yn, 3 * w->ycount, w->ycols_cap);
+    size_t ny = (size_t)(3 * w->ycount) * (size_t)w->yk;
+    ny = ny < w->ytail_cap ? ny : w->ytail_cap;
+    NS_PACK_ARRAY(p, w->yw, ny, w->ytail_cap);
+    NS_PACK_ARRAY(p, w->yt, ny, w->ytail_cap);
+    NS_PACK_ARRAY(p, w->ydense, w->ydense_cap, w->ydense_cap);
+    NS_PACK_ARRAY(p, w->yu, 0, w->yu_cap);
+    NS_PACK_ARRAY(p, w->yplace, 0, w->yplace_cap);
+    if (!p->writing) {
+        w->fixed = fixed;
+        w->job_B = jb;
+        w->job_Z = jz;
+    }
+}
+
+static void schur_pack(NsPack *p, CoupledSchur *w)
+{
+    uint32_t size = sizeof *w;
+    NS_PACK(p, size);
+    if (!p->writing && !p->failed && size != sizeof *w)
+        ns_pack_fail(p, "schur: written by another build (%u bytes, here %zu)", size, sizeof *w);
+    double **views[7] = {&w->Zn, &w->C, &w->L, &w->Cp, &w->Lp, &w->sc, &w->small};
+    int64_t at[7]; /* their offsets in buf, -1: NULL */
+    for (int k = 0; k < 7 && p->writing; k++)
+        at[k] = *views[k] ? *views[k] - w->buf : -1;
+    ns_pack_scalars(p, w, sizeof *w, schur_forget);
+    NS_PACK(p, at);
+    ns_solver_pack(p, &w->fac); /* first: waits for the job that writes job_Z */
+    schur_pack_arrays(p, w);
+    if (p->writing || p->failed)
+        return;
+    for (int k = 0; k < 7; k++) {
+        if (at[k] < -1 || (at[k] >= 0 && (!w->buf || (uint64_t)at[k] > w->buf_cap)))
+            ns_pack_fail(p, "schur: bad view of the scratch (%lld)", (long long)at[k]);
+        *views[k] = at[k] >= 0 && !p->failed ? w->buf + at[k] : NULL;
+    }
+    if (w->pending) /* the solver's job computed its columns into job_Z: now these arrays */
+        ns_solver_factor_async_moved(w->fac, w->job_B, w->job_Z);
+}
+
+int coupled_schur_pack(NsPack *p, CoupledSchur **wp)
+{
+    CoupledSchur *w = ns_pack_object(p, (void **)wp, sizeof **wp, "schur");
+    if (w)
+        schur_pack(p, w);
     return p->failed ? -1 : 0;
+}
+
+int coupled_schur_pending(const CoupledSchur *w)
+{
+    return w && w->pending;
 }

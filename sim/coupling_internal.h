@@ -50,6 +50,8 @@ void coupled_schur_destroy(CoupledSchur *w);
 /* Our solver's state between steps, packed (sim/snapshot.h; *w NULL allowed both ways). */
 struct NsPack;
 int coupled_schur_pack(struct NsPack *p, CoupledSchur **w);
+/* A refactorization is scheduled for the next step (tests). */
+int coupled_schur_pending(const CoupledSchur *w);
 int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st);
 
 /* The paper's solver (coupled_paper.c): Algorithm 3 with CG on Eq. 7 per trial. */

@@ -204,6 +204,40 @@ int ns_pack_struct(NsPack *p, const char tag[4], void *s, size_t size, void (*bl
     return ns_pack_bytes(p, copy, size);
 }
 
+void *ns_pack_object(NsPack *p, void **obj, size_t size, const char *what)
+{
+    uint8_t present = *obj != NULL;
+    if (ns_pack_bytes(p, &present, 1) != 0 || p->writing)
+        return p->failed ? NULL : *obj;
+    *obj = NULL;
+    if (present > 1)
+        ns_pack_fail(p, "%s: bad header at byte %zu", what, p->pos - 1);
+    else if (present && size > NS_PACK_MAX_BYTES - p->allocated)
+        ns_pack_fail(p, "%s: more than %zu GiB in all", what, NS_PACK_MAX_BYTES >> 30);
+    else if (present && !(*obj = calloc(1, size)))
+        ns_pack_fail(p, "%s: out of memory (%zu bytes)", what, size);
+    else
+        p->allocated += present ? size : 0;
+    return *obj;
+}
+
+int ns_pack_scalars(NsPack *p, void *obj, size_t size, void (*forget)(void *))
+{
+    if (!p->writing) {
+        ns_pack_bytes(p, obj, size);
+        forget(obj);
+        return p->failed ? -1 : 0;
+    }
+    void *copy = malloc(size ? size : 1);
+    if (!copy)
+        return ns_pack_fail(p, "out of memory (%zu bytes)", size);
+    memcpy(copy, obj, size);
+    forget(copy);
+    int rc = ns_pack_bytes(p, copy, size);
+    free(copy);
+    return rc;
+}
+
 int ns_pack_checksum(NsPack *p)
 {
     uint64_t sum = sum_now(p);

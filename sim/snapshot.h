@@ -58,6 +58,14 @@ int ns_pack_array(NsPack *p, void **ptr, size_t elem, size_t count, size_t cap);
 #define NS_PACK_MAX_ELEM 256
 int ns_pack_array_blank(NsPack *p, void **ptr, size_t elem, size_t count, size_t cap,
                         void (*blank)(void *elem));
+/* An owned structure at *obj (NULL allowed): whether there is one, written or read; a reader
+ * allocates it (size bytes, zeroed) for its fields to be read into (what: its name in the
+ * messages). Returns the structure, or NULL (none, or a failure). */
+void *ns_pack_object(NsPack *p, void **obj, size_t size, const char *what);
+/* A structure's own bytes (size at obj): a writer writes a copy whose pointers forget cleared
+ * (a snapshot holds no addresses); a reader reads them and clears them the same way (its
+ * arrays are read next). Returns 0 or -1. */
+int ns_pack_scalars(NsPack *p, void *obj, size_t size, void (*forget)(void *));
 /* The failure "what: detail" (the first one sticks); returns -1. */
 int ns_pack_fail(NsPack *p, const char *fmt, ...)
 #if defined(__GNUC__)

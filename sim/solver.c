@@ -17,6 +17,7 @@
 #include "ns_config.h"
 #include "supernodal.h"
 
+#include <limits.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -177,6 +178,16 @@ static void start_common(cholmod_common *cm)
 #endif
 }
 
+/* The solver's own common, and BLAS on one thread (the kinds with a factor). */
+static void start_solver_common(NsSolver *s)
+{
+#if NS_HAVE_OPENBLAS
+    pthread_once(&blas_once, blas_one_thread);
+#endif
+    start_common(&s->cm);
+    s->cm_started = 1;
+}
+
 const char *ns_solver_name(NsSolverKind kind)
 {
     switch (kind) {
@@ -202,13 +213,8 @@ NsSolver *ns_solver_create(NsSolverKind kind)
     s->refresh_lag = 2;
     s->threads = 1;
     atomic_init(&s->job.done, 0);
-    if (kind == NS_SOLVER_DIRECT || kind == NS_SOLVER_STALE_PCG) {
-#if NS_HAVE_OPENBLAS
-        pthread_once(&blas_once, blas_one_thread);
-#endif
-        start_common(&s->cm);
-        s->cm_started = 1;
-    }
+    if (kind == NS_SOLVER_DIRECT || kind == NS_SOLVER_STALE_PCG)
+        start_solver_common(s);
     return s;
 }
 
@@ -1242,15 +1248,324 @@ int ns_solver_tail_block(NsSolver *s, int n3, const double **L22)
     return s->tail_k;
 }
 
-/* ---- snapshots (sim/snapshot.h) ---- */
+/* ---- snapshots (sim/snapshot.h) ----
+ *
+ * Held: the solver's scalars and arrays, its CHOLMOD factors field by field (CHOLMOD has no
+ * serialization of its own) read back into CHOLMOD's allocator, its dense vectors. Made again
+ * on reading: the commons, started as ns_solver_create starts them (they hold settings, which
+ * analyze restores after each change, and workspace, which CHOLMOD leaves clean between calls);
+ * the single-precision copies, ns_super_from_cholmod of the factor read back (a rounding of its
+ * values, its cut a function of its structure), the one in use given its tail block again
+ * (ns_super_set_tail of the block tail_cur points to, the last one put there). A
+ * refactorization still running is waited for and held as finished, not adopted. Not held,
+ * zeroed on reading, because every use writes them before it reads them: work, job.dof (read by
+ * the finished job only), and the values of `spare`, which the next factorization overwrites
+ * (CHOLMOD's supernodal factorization clears each supernode before it assembles into it). */
 
-int ns_solver_pack(NsPack *p, NsSolver **s)
+/* What a solver's pointers pointed to, held beside its bytes. */
+typedef struct SolverLinks {
+    uint8_t cm, job_cm; /* the commons were started */
+    uint8_t sf, job_sf; /* copies of L and of job.L were made */
+    uint8_t tail_cur;   /* 0: NULL, 1: tail_D, 2: tail_L0 */
+    uint8_t iperm_of;   /* iperm is the copy's (sf) */
+    uint8_t symbolic;   /* the job reads Lsym */
+    uint8_t pad;
+} SolverLinks;
+
+/* Every pointer of s NULL, its commons and thread zeroed: the copy a writer writes, and a read
+ * solver before its arrays are read (its bytes carried stale addresses). */
+static void solver_forget(void *obj)
 {
-    uint8_t present = *s != NULL;
+    NsSolver *s = obj;
+    RefreshJob *j = &s->job;
+    memset(&s->cm, 0, sizeof s->cm);
+    memset(&j->cm, 0, sizeof j->cm);
+    memset(&j->thread, 0, sizeof j->thread);
+    s->cm_started = j->cm_started = 0;
+    j->running = 0;
+    atomic_store_explicit(&j->done, 0, memory_order_relaxed);
+    s->Lsym = s->L = s->spare = NULL;
+    s->sf = NULL;
+    j->M = NULL;
+    j->symbolic = j->L = NULL;
+    j->sf = NULL;
+    j->B = NULL;
+    j->Z = NULL;
+    j->dof = NULL;
+    j->tail_S = j->tail_L0 = NULL;
+    s->B = s->X = s->Y = s->E = NULL;
+    s->dof = s->dof_src = s->dof_held = NULL;
+    s->work = NULL;
+    s->tail_req = NULL;
+    s->tail_S = s->tail_L0 = s->tail_D = NULL;
+    s->tail_cur = NULL;
+    s->iperm = NULL;
+    s->iperm_of = NULL;
+}
+
+/* An array of count elements of elem bytes in CHOLMOD's allocator (so that CHOLMOD frees it),
+ * or NULL; with data 0 its contents are not held (read back zeroed). */
+static void pack_cm_array(NsPack *p, void **a, size_t count, size_t elem, int data,
+                          cholmod_common *cm)
+{
+    uint8_t present = *a != NULL;
+    NS_PACK(p, present);
+    if (!p->writing) {
+        *a = NULL;
+        if (p->failed || !present)
+            return;
+        if (present != 1 || count > NS_PACK_MAX_BYTES / elem ||
+            count * elem > NS_PACK_MAX_BYTES - p->allocated ||
+            (data && count * elem > p->size - p->pos)) {
+            ns_pack_fail(p, "solver: bad CHOLMOD array at byte %zu (%zu x %zu bytes)", p->pos,
+                         count, elem);
+            return;
+        }
+        *a = data ? cholmod_malloc(count, elem, cm) : cholmod_calloc(count, elem, cm);
+        if (!*a) {
+            ns_pack_fail(p, "solver: out of memory (%zu bytes)", count * elem);
+            return;
+        }
+        p->allocated += count * elem;
+    }
+    if (present && data)
+        ns_pack_bytes(p, *a, count * elem);
+}
+
+/* A CHOLMOD object at *obj (NULL allowed), its header h (size bytes) first: written with its
+ * pointers cleared (forget), read into an object of CHOLMOD's allocator (cm; NULL: none may be
+ * read) whose pointers are NULL until the caller reads its arrays. Returns the object, or NULL
+ * (none, or a failure). */
+static void *pack_cm_object(NsPack *p, void **obj, void *h, size_t size, void (*forget)(void *),
+                            cholmod_common *cm)
+{
+    uint8_t present = *obj != NULL;
     NS_PACK(p, present);
     if (!p->writing)
-        *s = NULL;
-    if (present)
-        ns_pack_fail(p, "solver: snapshots of a factored solver are not implemented yet");
+        *obj = NULL;
+    if (!present || p->failed)
+        return NULL;
+    if (p->writing)
+        memcpy(h, *obj, size);
+    ns_pack_scalars(p, h, size, forget);
+    if (p->writing)
+        return *obj;
+    if (!p->failed && (present != 1 || !cm))
+        ns_pack_fail(p, "solver: bad CHOLMOD object before byte %zu", p->pos);
+    void *o = p->failed ? NULL : cholmod_malloc(1, size, cm);
+    if (o)
+        *obj = memcpy(o, h, size);
+    else
+        ns_pack_fail(p, "solver: out of memory");
+    return o;
+}
+
+static void factor_forget(void *h)
+{
+    cholmod_factor *L = h;
+    L->Perm = L->ColCount = L->IPerm = NULL;
+    L->p = L->i = L->x = L->z = L->nz = L->next = L->prev = NULL;
+    L->super = L->pi = L->px = L->s = NULL;
+}
+
+static void dense_forget(void *h)
+{
+    cholmod_dense *D = h;
+    D->x = D->z = NULL;
+}
+
+/* The kinds of factor solver.c makes: int indices, real or symbolic, double. */
+static int factor_kind_held(const cholmod_factor *L)
+{
+    return L->itype == CHOLMOD_INT && L->dtype == CHOLMOD_DOUBLE &&
+           (L->xtype == CHOLMOD_PATTERN || L->xtype == CHOLMOD_REAL) && L->n <= INT_MAX &&
+           L->nsuper <= L->n && (L->is_super == 0 || L->is_super == 1);
+}
+
+/* What reading needs of a factor before it makes the copy (ns_super_from_cholmod) and puts a
+ * tail block into it: a supernodal structure within its arrays. NULL if it holds. */
+static const char *factor_check(const cholmod_factor *L)
+{
+    if (!L->is_super)
+        return NULL;
+    const int *sup = L->super, *pi = L->pi, *px = L->px, *rows = L->s, *perm = L->Perm;
+    int n = (int)L->n, ns = (int)L->nsuper;
+    if (!sup || !pi || !px || !rows || !perm)
+        return "arrays missing";
+    if (sup[0] != 0 || pi[0] != 0 || px[0] != 0 || sup[ns] != n || (size_t)pi[ns] > L->ssize ||
+        (size_t)px[ns] > L->xsize)
+        return "supernode bounds";
+    for (int s = 0; s < ns; s++) {
+        long nc = sup[s + 1] - sup[s], nr = pi[s + 1] - pi[s];
+        if (nc < 1 || nr < nc || (long)px[s + 1] - px[s] < nr * nc)
+            return "supernode sizes";
+    }
+    for (int i = 0; i < pi[ns]; i++)
+        if (rows[i] < 0 || rows[i] >= n)
+            return "row index";
+    for (int k = 0; k < n; k++)
+        if (perm[k] < 0 || perm[k] >= n)
+            return "permutation";
+    return NULL;
+}
+
+/* A CHOLMOD factor (NULL allowed), its arrays sized as cholmod_free_factor sizes them; values
+ * 0: L->x's contents not held. A reader allocates with cm (NULL: none may be read). */
+static void pack_factor(NsPack *p, cholmod_factor **Lp, int values, cholmod_common *cm)
+{
+    cholmod_factor h, *L = pack_cm_object(p, (void **)Lp, &h, sizeof h, factor_forget, cm);
+    if (!L)
+        return;
+    if (!factor_kind_held(&h) || (p->writing && (L->x != NULL) != (L->xtype == CHOLMOD_REAL)))
+        ns_pack_fail(p, "solver: a CHOLMOD factor of a kind snapshots do not hold, at byte %zu",
+                     p->pos);
+    size_t n = L->n, ns = L->nsuper + 1;
+    void **arr[12] = {&L->Perm, &L->ColCount, &L->IPerm, &L->p,  &L->i,  &L->nz,
+                      &L->next, &L->prev,     &L->super, &L->pi, &L->px, &L->s};
+    size_t count[12] = {n, n, n, n + 1, L->nzmax, n, n + 2, n + 2, ns, ns, ns, L->ssize};
+    for (int k = 0; k < 12; k++)
+        pack_cm_array(p, arr[k], count[k], sizeof(int), 1, cm);
+    if (L->xtype == CHOLMOD_REAL)
+        pack_cm_array(p, &L->x, L->is_super ? L->xsize : L->nzmax, sizeof(double), values, cm);
+    const char *bad = p->writing || p->failed ? NULL : factor_check(L);
+    if (bad)
+        ns_pack_fail(p, "solver: a CHOLMOD factor read back is not one (%s)", bad);
+}
+
+/* A dense matrix of doubles (NULL allowed), read back into CHOLMOD's allocator. */
+static void pack_dense(NsPack *p, cholmod_dense **Dp, cholmod_common *cm)
+{
+    cholmod_dense h, *D = pack_cm_object(p, (void **)Dp, &h, sizeof h, dense_forget, cm);
+    if (!D)
+        return;
+    if (h.xtype != CHOLMOD_REAL || h.dtype != CHOLMOD_DOUBLE || h.d < h.nrow ||
+        (h.ncol > 0 && h.d > h.nzmax / h.ncol) || (p->writing && !D->x))
+        ns_pack_fail(p, "solver: a dense matrix of a kind snapshots do not hold, at byte %zu",
+                     p->pos);
+    pack_cm_array(p, &D->x, D->nzmax, sizeof(double), 1, cm);
+}
+
+/* The links of s, as a writer finds them. */
+static SolverLinks links_of(NsPack *p, const NsSolver *s)
+{
+    SolverLinks ln = {0};
+    ln.cm = (uint8_t)s->cm_started;
+    ln.job_cm = (uint8_t)s->job.cm_started;
+    ln.sf = s->sf != NULL;
+    ln.job_sf = s->job.sf != NULL;
+    ln.tail_cur = !s->tail_cur ? 0 : s->tail_cur == s->tail_D ? 1 : 2;
+    ln.iperm_of = s->iperm_of != NULL;
+    ln.symbolic = s->job.pending && s->job.symbolic == s->Lsym && s->Lsym;
+    if ((s->tail_cur && s->tail_cur != s->tail_D && s->tail_cur != s->tail_L0) ||
+        (s->iperm_of && s->iperm_of != s->sf) || s->job.M || s->job.running)
+        ns_pack_fail(p, "solver: links that snapshots do not hold");
+    return ln;
+}
+
+/* A read solver's links made again: its copies, the tail block in use, the job's analysis. */
+static void solver_relink(NsPack *p, NsSolver *s, const SolverLinks *ln)
+{
+    RefreshJob *j = &s->job;
+    j->symbolic = ln->symbolic ? s->Lsym : NULL;
+    atomic_store_explicit(&j->done, j->pending, memory_order_relaxed);
+    if (ln->tail_cur)
+        s->tail_cur = ln->tail_cur == 1 ? s->tail_D : s->tail_L0;
+    if (p->failed)
+        return;
+    size_t k = s->tail_k > 0 ? (size_t)s->tail_k : 0;
+    if (s->tail_k < 0 || (k > 0 && (k * k >= s->tail_cap || !s->Lsym || k > s->Lsym->n)))
+        ns_pack_fail(p, "solver: bad tail (%d DOFs)", s->tail_k);
+    else if (ln->sf && !(s->L && (s->sf = ns_super_from_cholmod(s->L))))
+        ns_pack_fail(p, "solver: the factor's single-precision copy could not be made again");
+    else if (ln->job_sf && !(j->L && (j->sf = ns_super_from_cholmod(j->L))))
+        ns_pack_fail(p, "solver: the new factor's single-precision copy could not be made again");
+    else if (ln->iperm_of && (!s->sf || !s->iperm || s->iperm_cap < s->nfree))
+        ns_pack_fail(p, "solver: bad inverse permutation");
+    if (p->failed)
+        return;
+    if (s->sf && s->tail_cur && k > (size_t)ns_super_n(s->sf))
+        ns_pack_fail(p, "solver: bad tail (%d DOFs)", s->tail_k);
+    else if (s->sf && s->tail_cur && k > 0)
+        ns_super_set_tail(s->sf, (int)k, s->tail_cur);
+    s->iperm_of = ln->iperm_of ? s->sf : NULL;
+}
+
+/* The solver's own arrays (malloc'd). */
+static void pack_arrays(NsPack *p, NsSolver *s)
+{
+    RefreshJob *j = &s->job;
+    /* Arrays present or not by their pointer (a reader's are NULL yet): the flag first. */
+    uint8_t has_dof = s->dof != NULL, has_iperm = s->iperm_of != NULL;
+    NS_PACK(p, has_dof);
+    NS_PACK(p, has_iperm);
+    NS_PACK_ARRAY(p, s->dof, has_dof ? s->n3 : 0, s->dof_cap);
+    NS_PACK_ARRAY(p, s->dof_src, s->nsrc, s->src_cap);
+    NS_PACK_ARRAY(p, s->dof_held, s->nheld, s->held_cap);
+    NS_PACK_ARRAY(p, s->work, 0, s->work_cap);
+    NS_PACK_ARRAY(p, s->tail_req, s->tail_nreq, s->tail_req_cap);
+    NS_PACK_ARRAY(p, s->tail_S, s->tail_cap, s->tail_cap);
+    NS_PACK_ARRAY(p, s->tail_L0, s->tail_cap, s->tail_cap);
+    NS_PACK_ARRAY(p, s->tail_D, s->tail_cap, s->tail_cap);
+    NS_PACK_ARRAY(p, s->iperm, has_iperm ? s->nfree : 0, s->iperm_cap);
+    NS_PACK_ARRAY(p, j->dof, 0, j->dof_cap);
+    NS_PACK_ARRAY(p, j->tail_S, s->tail_cap, s->tail_cap);
+    NS_PACK_ARRAY(p, j->tail_L0, s->tail_cap, s->tail_cap);
+}
+
+static void solver_pack(NsPack *p, NsSolver *s)
+{
+    /* The layouts held whole: a snapshot of another build is refused. */
+    uint32_t size[3] = {sizeof *s, sizeof(cholmod_factor), sizeof(cholmod_dense)};
+    uint32_t here[3] = {sizeof *s, sizeof(cholmod_factor), sizeof(cholmod_dense)};
+    NS_PACK(p, size);
+    if (!p->writing && !p->failed && memcmp(size, here, sizeof size) != 0)
+        ns_pack_fail(p, "solver: written by another build (its layouts %u, %u, %u bytes)", size[0],
+                     size[1], size[2]);
+    SolverLinks ln = {0};
+    if (p->writing) {
+        job_join(s); /* its factor is held as made, adopted later as it would have been */
+        ln = links_of(p, s);
+    }
+    ns_pack_scalars(p, s, sizeof *s, solver_forget);
+    NS_PACK(p, ln);
+    RefreshJob *j = &s->job;
+    if (!p->writing && !p->failed) {
+        if (ln.cm > 1 || ln.job_cm > 1 || ln.sf > 1 || ln.job_sf > 1 || ln.tail_cur > 2 ||
+            ln.iperm_of > 1 || ln.symbolic > 1)
+            ns_pack_fail(p, "solver: bad links at byte %zu", p->pos);
+        if (ln.cm == 1)
+            start_solver_common(s);
+        if (ln.job_cm == 1) {
+            start_common(&j->cm);
+            j->cm_started = 1;
+        }
+    }
+    cholmod_common *cm = s->cm_started ? &s->cm : NULL;
+    pack_factor(p, &s->Lsym, 1, cm);
+    pack_factor(p, &s->L, 1, cm);
+    pack_factor(p, &s->spare, 0, cm);
+    pack_factor(p, &j->L, 1, j->cm_started ? &j->cm : NULL);
+    pack_dense(p, &s->B, cm);
+    pack_dense(p, &s->X, cm);
+    pack_dense(p, &s->Y, cm);
+    pack_dense(p, &s->E, cm);
+    pack_arrays(p, s);
+    if (!p->writing)
+        solver_relink(p, s, &ln);
+}
+
+int ns_solver_pack(NsPack *p, NsSolver **sp)
+{
+    NsSolver *s = ns_pack_object(p, (void **)sp, sizeof **sp, "solver");
+    if (s)
+        solver_pack(p, s);
     return p->failed ? -1 : 0;
+}
+
+void ns_solver_factor_async_moved(NsSolver *s, const double *B, double *Z)
+{
+    if (s && s->job.pending && s->job.adopt_at == -1) {
+        s->job.B = B;
+        s->job.Z = Z;
+    }
 }

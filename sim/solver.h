@@ -122,6 +122,10 @@ long ns_solver_factor_count(const NsSolver *s);
  * Returns 0, or -1 (another pattern, no factor yet, memory: nothing scheduled). */
 int ns_solver_factor_async(NsSolver *s, const NsBlockMatrix *A, const uint8_t *dof_fixed, int ncols,
                            const double *B, double *Z);
+/* After ns_solver_pack read a solver whose ns_solver_factor_async was pending: the caller's B
+ * and Z read back by the caller (at new addresses). The job had finished when it was written,
+ * so Z must hold what it held then. Does nothing if none is pending. */
+void ns_solver_factor_async_moved(NsSolver *s, const double *B, double *Z);
 /* Waits for the scheduled factorization and puts it in use. Returns 1 if it was adopted (then
  * *cols_ok says whether its columns were computed), 0 if none was pending or it failed (the old
  * factor stays). */
