@@ -107,10 +107,10 @@ run G "$SC" --replay "$TMP/a.csv" --resume "$TMP/f.ck" || fail "replay resume" "
 same "a replayed log resumed from 0.5 s" A G
 
 # Refusals.
-cp "$TMP/b.ck" "$TMP/damaged.ck"
-size=$(stat -c %s "$TMP/damaged.ck")
-printf '\x5a' | dd of="$TMP/damaged.ck" bs=1 seek=$((size / 2)) conv=notrunc status=none
-refused damaged 1 "damaged\|bad array" "$SC" --resume "$TMP/damaged.ck"
+cp "$TMP/b.ck" "$TMP/input-damaged.ck"
+size=$(stat -c %s "$TMP/input-damaged.ck")
+printf '\x5a' | dd of="$TMP/input-damaged.ck" bs=1 seek=$((size / 2)) conv=notrunc status=none
+refused damaged 1 "damaged\|bad array" "$SC" --resume "$TMP/input-damaged.ck"
 head -c $((size - 100)) "$TMP/b.ck" >"$TMP/short.ck"
 refused truncated 1 "truncated\|bad array" "$SC" --resume "$TMP/short.ck"
 refused foreign 1 "not a needlesim checkpoint" "$SC" --resume "$SRC/scenarios/tutorial.lua"
