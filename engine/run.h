@@ -24,6 +24,7 @@ typedef struct NsRunOpts {
      * another scenario file */
     const char *trainee, *session;
     bool rescore;
+    bool live;            /* a live session (docs/live.md): controls come given to ns_run_tick */
     const char *sets[32]; /* --set KEY=VALUE */
     int nsets;
     long steps; /* 0: the scenario decides */
@@ -96,6 +97,7 @@ typedef struct NsRun {
     bool tty;            /* progress on stderr */
     double t0;           /* the loop's start (ns_wall_s) */
     bool stop_when_done; /* bench: the script's end ends the run even before --steps */
+    bool live_scripted;  /* live: the scenario's script drives still (live.script) */
     FILE *traj;
     /* pictures */
     bool rendering;
@@ -113,6 +115,9 @@ typedef struct NsRun {
     double end_s;     /* the run's end: last frame, contact sheet, video closed [s] */
     NsSeries tips[3]; /* bench --compare: the tip after every step [m] */
     bool log_tips;
+    /* report.json: more keys at its end (a live session's `live`), or NULL */
+    void (*report_extra)(NsJson *j, void *ctx);
+    void *report_ctx;
 } NsRun;
 
 enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT };
@@ -164,8 +169,10 @@ int ns_run_loop(NsRun *r, char *err, int err_sz);
 void ns_run_free(NsRun *r);
 /* engine/run_script.c: the Lua bridge (the `sim` table, the script's coroutine, on_tick) */
 int ns_run_script_start(NsRun *r, char *err, int err_sz);
-int ns_run_script_tick(NsRun *r, double t, int exited, int *more, NsControl *ctl, char *err,
-                       int err_sz);
+/* given: a live session's controls, which on_tick sees in sim.control and may change (the
+ * script is not resumed unless live.script has it drive until it ends: r->live_scripted). */
+int ns_run_script_tick(NsRun *r, double t, int exited, const NsControl *given, int *more,
+                       NsControl *ctl, char *err, int err_sz);
 /* engine/run_output.c: the output folder, the trajectory, the temporary files */
 char *ns_run_path_join(const char *dir, const char *name);
 int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz);
@@ -174,7 +181,16 @@ void ns_run_outputs_remove(NsRun *r);
 /* engine/run_score.c: scoring the placement */
 double ns_run_dist_mm(const double *a, const double *b);
 int ns_run_score(NsRun *r, NsRunResults *res);
+/* The score of the state now, the lookups' hints left as they were (pictures, live frames):
+ * what is looked at, and how often, must not change the final score's last bits. */
+int ns_run_score_peek(NsRun *r, NsRunResults *res);
 void ns_run_results_free(NsRunResults *res);
+/* engine/cmd_run.c: --record's path checked against the run's other files; the control logs
+ * opened (a --replay read and checked, a --record started) */
+int ns_run_check_record_path(const NsRunOpts *o);
+/* A --set KEY=VALUE added to o: NULL, or why not (a format with one %s, the value). */
+const char *ns_run_opt_set(NsRunOpts *o, const char *v);
+int ns_run_open_logs(NsRun *r, char *err, int err_sz);
 /* engine/run_report.c: report.json */
 void ns_run_stats_object(NsJson *j, const char *key, const NsSeries *s);
 void ns_run_json_vec(NsJson *j, const char *key, const double *v);
