@@ -40,6 +40,8 @@ typedef struct LiveArgs {
     NsLiveOpts live;
     const char *bind;
     int port;
+    NsLiveHook hook; /* bench --live: its client starts once the server listens */
+    NsLiveRunResult *result;
 } LiveArgs;
 
 static int usage_error(const char *fmt, const char *arg)
@@ -200,8 +202,12 @@ static int live_session(NsRun *r, LiveArgs *la, char *record_path, char *err, in
     }
     char url[256];
     ns_live_server_url(srv, url, sizeof url);
-    printf("needlesim live: open %s\n", url);
-    fflush(stdout);
+    if (la->hook.fn) { /* bench --live: its client, not a person, opens it */
+        la->hook.fn(url, ns_live_server_port(srv), la->hook.ctx);
+    } else {
+        printf("needlesim live: open %s\n", url);
+        fflush(stdout);
+    }
     if (!r->opt.quiet)
         fprintf(stderr, "needlesim live: %s; End on the page, or Ctrl-C, ends the session\n",
                 r->sc.name);
@@ -216,6 +222,16 @@ static int live_session(NsRun *r, LiveArgs *la, char *record_path, char *err, in
     rc = rc ? rc : ns_run_outputs_commit(r, err, err_sz);
     if (rc == 0 && !r->opt.quiet)
         print_summary(r, s, &res, hash);
+    if (rc == 0 && la->result) {
+        NsLiveRunResult *o = la->result;
+        ns_live_session_figures(s, &o->fig);
+        o->hash = hash;
+        o->score = res.total;
+        o->steps = r->steps;
+        o->sim_s = (double)r->steps * r->spec.dt;
+        o->wall_s = r->wall_s;
+        o->seeds_planned = r->spec.seed_count;
+    }
     ns_run_results_free(&res);
     r->report_extra = NULL;
     ns_live_session_free(s);
@@ -223,6 +239,11 @@ static int live_session(NsRun *r, LiveArgs *la, char *record_path, char *err, in
 }
 
 int ns_cmd_live(int argc, char **argv)
+{
+    return ns_live_run(argc, argv, (NsLiveHook){NULL, NULL}, NULL);
+}
+
+int ns_live_run(int argc, char **argv, NsLiveHook hook, NsLiveRunResult *result)
 {
     NsRun r;
     memset(&r, 0, sizeof r);
@@ -232,6 +253,8 @@ int ns_cmd_live(int argc, char **argv)
     int pa = parse_args(argc, argv, &la);
     if (pa)
         return pa == 1 ? 0 : pa;
+    la.hook = hook;
+    la.result = result;
     r.opt = la.run;
     char err[1024] = "", record_path[4096];
     ns_cleanup_install();

@@ -65,6 +65,22 @@ typedef struct NsLiveFigures {
     int clients;
 } NsLiveFigures;
 void ns_live_session_figures(const NsLiveSession *s, NsLiveFigures *f);
+
+/* engine/cmd_live.c: `needlesim live` with its own arguments (argv[0] is "live"), and a hook
+ * called with the URL and port once the server listens (bench --live starts its client there);
+ * the session's figures and outcome in *result when it is not NULL. Returns the exit status. */
+typedef struct NsLiveHook {
+    void (*fn)(const char *url, int port, void *ctx);
+    void *ctx;
+} NsLiveHook;
+typedef struct NsLiveRunResult {
+    NsLiveFigures fig;
+    uint64_t hash;
+    double score, sim_s, wall_s;
+    long steps;
+    int seeds_planned;
+} NsLiveRunResult;
+int ns_live_run(int argc, char **argv, NsLiveHook hook, NsLiveRunResult *result);
 void ns_live_session_free(NsLiveSession *s);
 
 #endif
