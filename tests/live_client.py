@@ -5,6 +5,7 @@ the end. Uses apt's python3-websockets (tools/quickstart.sh).
 
     live_client.py session URL      drive a session through the checks, then end it
     live_client.py token URL        the token checks of a session bound to 0.0.0.0
+    live_client.py scripted URL     a live.script set-up: controls refused until it hands over
 
 Exits 0 when every check held, 1 with the failed check on stderr. No timing is asserted
 beyond generous liveness timeouts."""
@@ -166,10 +167,29 @@ async def token(url):
         await c.pump(lambda c: c.frames >= 1)
 
 
+async def scripted(url):
+    async with websockets.connect(ws_url(url), max_size=None) as ws:
+        c = Client(ws)
+        await c.pump(lambda c: c.state is not None)
+        if c.state["scripted"]:
+            err = await c.errors_after(json.dumps({"insert_speed": 0.01}))
+            check("script" in err, "controls are refused during the set-up: %s" % err)
+        await c.pump(lambda c: not c.state["scripted"])
+        d0 = c.state["depth_m"]
+        await ws.send(json.dumps({"insert_speed": 0.02}))
+        await c.pump(lambda c: c.state["depth_m"] > d0 + 0.002)
+        await ws.send(json.dumps({"end": True}))
+        try:
+            await c.pump(lambda c: c.ended)
+        except websockets.ConnectionClosed:
+            pass
+
+
 def main():
     mode, url = sys.argv[1], sys.argv[2]
     try:
-        asyncio.run(session(url) if mode == "session" else token(url))
+        run = {"session": session, "token": token, "scripted": scripted}[mode]
+        asyncio.run(run(url))
     except (AssertionError, asyncio.TimeoutError, OSError, websockets.WebSocketException) as e:
         print("live_client %s: %s: %s" % (mode, type(e).__name__, e), file=sys.stderr)
         return 1

@@ -128,6 +128,35 @@ else
     fail "replay" "$(tail -2 "$TMP/replay.err")"
 fi
 
+# ---- live = {script = true}: the scenario's set-up drives, then the trainee; its replay ----
+sed -e 's|^    script = function()|    live = { script = true },\n    script = function()|' \
+    -e 's|act.insert { speed = 0.02, depth = 0.03 }.*|act.insert { speed = 0.02, depth = 0.004 }|' \
+    -e '/act.wait { time = 0.2 }/d' "$SRC/scenarios/tutorial.lua" >"$TMP/scripted.lua"
+OUT3="$TMP/scripted"
+if start scripted "$TMP/scripted.lua" --port 0 -o "$OUT3" --width 320 --height 180; then
+    if "$PY" "$SRC/tests/live_client.py" scripted "$URL"; then
+        pass "scripted: the set-up drives, then the client"
+    else
+        fail "scripted" "see above"
+    fi
+    wait_exit "$PID" 120
+    rc=$?
+    [ $rc -eq 0 ] && pass "scripted: exit 0" || fail "scripted: exit" "$rc"
+    if "$BIN" run "$TMP/scripted.lua" --replay "$OUT3/controls.csv" -o "$TMP/replay3" \
+        --no-render --quiet 2>"$TMP/replay3.err" &&
+        "$PY" - "$OUT3/report.json" "$TMP/replay3/report.json" <<'PY'; then
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+assert a["state_hash"] == b["state_hash"] and a["score"]["total"] == b["score"]["total"]
+PY
+        pass "scripted: the replay gives the same state hash and score"
+    else
+        fail "scripted: replay" "$(tail -2 "$TMP/replay3.err")"
+    fi
+else
+    fail "scripted: start" "$(tail -3 "$TMP/scripted.err")"
+fi
+
 # ---- bound elsewhere: the token; SIGTERM ends the session with its outputs ----
 OUT2="$TMP/token"
 if start token "$SRC/scenarios/tutorial.lua" --bind 0.0.0.0 --port 0 -o "$OUT2" \
