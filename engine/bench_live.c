@@ -14,11 +14,13 @@
 #include <civetweb.h>
 #include <math.h>
 #include <pthread.h>
+#include <signal.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "json.h"
 #include "live_session.h"
@@ -96,6 +98,7 @@ static void *client_main(void *arg)
         "127.0.0.1", b->port, 0, ebuf, sizeof ebuf, "/ws", NULL, on_data, on_close, b);
     if (!c) {
         snprintf(b->err, sizeof b->err, "the client cannot connect: %s", ebuf);
+        kill(getpid(), SIGTERM); /* nobody else would end the session */
         return NULL;
     }
     double T = b->seconds, t0 = ns_wall_s();

@@ -39,6 +39,7 @@ struct NsLiveSession {
     double insert_speed, twist_rate, twist_left, vb[3];
     int seeds_pending;
     bool needle_pending, paused, end;
+    bool scripted;               /* the run's live_scripted after the last step */
     double pending[PENDING_MAX]; /* arrival times of messages not yet applied [s] */
     int pending_n;
     struct Mark {
@@ -117,6 +118,7 @@ NsLiveSession *ns_live_session_new(NsRun *r, const NsLiveOpts *o, char *err, int
     s->mid = 1;
     s->front = 2;
     s->rtf_now = 1.0;
+    s->scripted = r->live_scripted;
     const NsRunSpec *sp = &r->spec;
     memcpy(s->first_entry.point, sp->entry_point, sizeof s->first_entry.point);
     memcpy(s->first_entry.direction, sp->entry_dir, sizeof s->first_entry.direction);
@@ -135,7 +137,7 @@ int ns_live_session_control(NsLiveSession *s, const NsLiveMsg *m, double arrival
     if (s->end || s->over) {
         ns_set_err(err, err_sz, "the session has ended");
         rc = -1;
-    } else if (s->r->live_scripted && (m->has & ~(unsigned)(NS_LIVE_PAUSE | NS_LIVE_END))) {
+    } else if (s->scripted && (m->has & ~(unsigned)(NS_LIVE_PAUSE | NS_LIVE_END))) {
         ns_set_err(err, err_sz, "the scenario's script drives the needle until its set-up ends");
         rc = -1;
     } else if ((m->has & NS_LIVE_DROP_SEED) && m->drop_seed && s->seeds_pending >= 8) {
@@ -392,6 +394,7 @@ static int publish(NsLiveSession *s, bool ended)
     ns_series_push(&s->snap_ms, 1e3 * (ns_wall_s() - t0));
     pthread_mutex_lock(&s->mu);
     b->paused = s->paused;
+    s->scripted = s->r->live_scripted;
     int t = s->mid;
     s->mid = s->back;
     s->back = t;
