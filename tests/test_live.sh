@@ -179,5 +179,21 @@ else
     fail "token: start" "$(tail -3 "$TMP/token.err")"
 fi
 
+# ---- bench --live: its synthetic client drives a session end to end ----
+if (timeout 300 "$BIN" bench --live "$SRC/scenarios/tutorial.lua" --seconds 3 \
+    --json --width 320 --height 180 -o "$TMP/bench" >"$TMP/bench.json" 2>"$TMP/bench.err") &&
+    "$PY" - "$TMP/bench.json" <<'PY'; then
+import json, sys
+b = json.load(open(sys.argv[1]))
+for k in ("delivered_fps_median", "rtf_median", "input_latency_ms_p95", "render_ms",
+          "encode_ms", "step_ms", "frames_received", "state_hash"):
+    assert k in b, k
+assert b["frames_received"] >= 1 and len(b["state_hash"]) == 16, b
+PY
+    pass "bench --live: a session driven by its client, the figures printed"
+else
+    fail "bench --live" "$(tail -3 "$TMP/bench.err")"
+fi
+
 echo "$PASSED passed, $FAILED failed"
 [ "$FAILED" -eq 0 ]
