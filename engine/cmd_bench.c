@@ -36,7 +36,8 @@
 static const char bench_usage[] =
     "usage: needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N]\n"
     "                       [--set KEY=VALUE]... [--compare NAME] [--repeat N] [--json]\n"
-    "                       [--snapshot]\n";
+    "                       [--snapshot]\n"
+    "       needlesim bench --live SCENARIO.lua [--seconds S] [--json] (a live session)\n";
 
 #define BENCH_MAX_REPEAT 100
 
@@ -430,6 +431,9 @@ static void bench_print_text(const BenchOut *b)
 
 int ns_cmd_bench(int argc, char **argv)
 {
+    for (int i = 1; i < argc; i++)
+        if (strcmp(argv[i], "--live") == 0)
+            return ns_bench_live(argc, argv);
     NsRunOpts o;
     memset(&o, 0, sizeof o);
     o.threads = 1;

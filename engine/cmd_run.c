@@ -65,6 +65,23 @@ static int usage_error(const char *fmt, const char *arg)
     return 2;
 }
 
+const char *ns_run_opt_set(NsRunOpts *o, const char *v)
+{
+    const char *eq = strchr(v, '=');
+    if (!eq || eq == v)
+        return "--set '%s': expected KEY=VALUE";
+    for (const char *c = v; *c; c++)
+        if ((unsigned char)*c < 0x20 || *c == 0x7f)
+            return "--set '%s': control characters are not allowed";
+    if (o->nsets == 32)
+        return "--set '%s': at most 32 --set values";
+    for (int k = 0; k < o->nsets; k++)
+        if (strncmp(o->sets[k], v, (size_t)(eq - v) + 1) == 0)
+            return "--set: '%s' is given twice";
+    o->sets[o->nsets++] = v;
+    return NULL;
+}
+
 static int parse_args(int argc, char **argv, NsRunOpts *o)
 {
     o->out_dir = "needlesim-out";
@@ -90,18 +107,9 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             if (strcmp(a, "-o") == 0) {
                 o->out_dir = v;
             } else if (strcmp(a, "--set") == 0) {
-                const char *eq = strchr(v, '=');
-                if (!eq || eq == v)
-                    return usage_error("--set '%s': expected KEY=VALUE", v);
-                for (const char *c = v; *c; c++)
-                    if ((unsigned char)*c < 0x20 || *c == 0x7f)
-                        return usage_error("--set '%s': control characters are not allowed", v);
-                if (o->nsets == 32)
-                    return usage_error("%s", "at most 32 --set values");
-                for (int k = 0; k < o->nsets; k++)
-                    if (strncmp(o->sets[k], v, (size_t)(eq - v) + 1) == 0)
-                        return usage_error("--set: '%s' is given twice", v);
-                o->sets[o->nsets++] = v;
+                const char *why = ns_run_opt_set(o, v);
+                if (why)
+                    return usage_error(why, v);
             } else if (strcmp(a, "--record") == 0) {
                 o->record = v;
             } else if (strcmp(a, "--replay") == 0) {
@@ -206,7 +214,7 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
 
 /* The control logs: a --replay log read and checked against this scenario (its file's hash,
  * the --set values), a --record log opened with the run's provenance (control_log.h). */
-static int open_logs(NsRun *r, char *err, int err_sz)
+int ns_run_open_logs(NsRun *r, char *err, int err_sz)
 {
     int rc = 0;
     /* The scenario file's identity, which a log carries and a replay checks (control_log.h). */
@@ -253,8 +261,8 @@ static int open_logs(NsRun *r, char *err, int err_sz)
                 ns_set_err(err, err_sz, "out of memory");
             rc = -1;
         } else {
-            NsLogProvenance prov = {NS_VERSION, r->sc.name, sc_hash, r->opt.trainee,
-                                    r->opt.session};
+            NsLogProvenance prov = {NS_VERSION,     r->sc.name,     sc_hash,
+                                    r->opt.trainee, r->opt.session, r->opt.live};
             ns_control_log_write_header(r->rec, &prov, r->opt.sets, r->opt.nsets);
         }
     }
@@ -330,7 +338,7 @@ static int canonical(const char *p, char *out, size_t n)
  * log, the checkpoint resumed) or its other outputs (report.json, trajectory.csv, summary.png,
  * the video, each other): compared as files (device and inode) where they exist, and as
  * canonical paths. Returns 0 or a usage error (2). */
-static int check_out_path(const NsRunOpts *o, const char *out, const char *flag)
+int ns_run_check_out_path(const NsRunOpts *o, const char *out, const char *flag)
 {
     if (!out)
         return 0;
@@ -364,6 +372,11 @@ static int check_out_path(const NsRunOpts *o, const char *out, const char *flag)
     return 0;
 }
 
+int ns_run_check_record_path(const NsRunOpts *o)
+{
+    return ns_run_check_out_path(o, o->record, "--record");
+}
+
 int ns_cmd_run(int argc, char **argv)
 {
     NsRun r;
@@ -376,8 +389,8 @@ int ns_cmd_run(int argc, char **argv)
     ns_cleanup_install();
     int rc = ns_run_outputs_prepare(&r, err, sizeof err) ? -2 : -1;
     /* --record and the checkpoint checked once -o's folder exists (they may be inside it). */
-    if (rc == -1 && (check_out_path(&r.opt, r.opt.record, "--record") ||
-                     check_out_path(&r.opt, r.opt.checkpoint, "--checkpoint-at"))) {
+    if (rc == -1 && (ns_run_check_out_path(&r.opt, r.opt.record, "--record") ||
+                     ns_run_check_out_path(&r.opt, r.opt.checkpoint, "--checkpoint-at"))) {
         ns_run_outputs_remove(&r);
         ns_run_free(&r);
         return 2;
@@ -388,7 +401,7 @@ int ns_cmd_run(int argc, char **argv)
     r.keep_views = r.opt.checkpoint && !r.opt.replay;
     if (rc == -1 && ns_run_load(&r, err, sizeof err) == 0)
         rc = 0;
-    rc = rc ? rc : open_logs(&r, err, sizeof err);
+    rc = rc ? rc : ns_run_open_logs(&r, err, sizeof err);
     if (rc == 0)
         ns_run_traj_header(&r);
     rc = rc ? rc : ns_run_build(&r, err, sizeof err);

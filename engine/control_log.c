@@ -45,6 +45,8 @@ void ns_control_log_write_header(FILE *f, const NsLogProvenance *prov, const cha
             fprintf(f, "#trainee %s\n", prov->trainee);
         if (prov->session)
             fprintf(f, "#session %s\n", prov->session);
+        if (prov->live)
+            fputs("#source live\n", f);
     }
     for (int i = 0; i < nsets; i++)
         fprintf(f, "#set %s\n", sets[i]);
@@ -228,6 +230,8 @@ static int read_comment(const char *p, const char *path, long lineno, NsControlL
         log->hash_line = lineno;
     } else if (strncmp(p, "#scenario ", 10) == 0) {
         snprintf(log->scenario, sizeof log->scenario, "%s", p + 10);
+    } else if (strcmp(p, "#source live") == 0) {
+        log->live = true;
     } else if (strncmp(p, "#needlesim ", 11) == 0) {
         snprintf(log->version, sizeof log->version, "%s", p + 11);
     } else if (strncmp(p, "#trainee ", 9) == 0 || strncmp(p, "#session ", 9) == 0) {

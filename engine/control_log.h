@@ -16,6 +16,8 @@
  *     #scenario_hash 8c2f0e13a4b5c6d7   FNV-1a 64 of the scenario file's bytes, 16 hex digits
  *     #trainee A-17 / #session 2026-11-27.3   with --trainee / --session ([A-Za-z0-9._-]{1,64})
  *     #set KEY=VALUE                    each --set of the run, which its replay must repeat
+ *     #source live                      recorded by `needlesim live`: the session may end before
+ *                                       the scenario's duration, and a replay ends with the log
  *
  * Other '#' lines are comments, skipped (later versions add keys). A replay refuses a log whose
  * scenario hash is not its scenario file's, unless told to re-score it; a log without a hash
@@ -65,6 +67,7 @@ typedef struct NsControlLog {
     bool has_hash;
     long hash_line; /* the #scenario_hash line, for messages */
     char trainee[NS_CONTROL_LOG_ID_MAX + 1], session[NS_CONTROL_LOG_ID_MAX + 1];
+    bool live; /* #source live */
 } NsControlLog;
 
 /* What a recorded log says it was recorded with. trainee and session may be NULL. */
@@ -72,6 +75,7 @@ typedef struct NsLogProvenance {
     const char *version, *scenario;
     uint64_t scenario_hash;
     const char *trainee, *session;
+    bool live; /* a live session's log: #source live */
 } NsLogProvenance;
 
 /* Reads a log for a scenario stepping by dt: '#' lines, the header above, then one row per step

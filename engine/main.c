@@ -26,6 +26,10 @@ static const char usage[] =
     "                [--frame-every K]]\n"
     "      run the scenario's script, score its targets, write DIR/report.json,\n"
     "      DIR/trajectory.csv and DIR/summary.png (and frames, a video: docs/rendering.md)\n"
+    "  needlesim live SCENARIO.lua [--port N] [--bind ADDR] [--width W --height H] [--fps F]\n"
+    "                 [--record LOG.csv] [-o DIR] [--set KEY=VALUE]... [--threads N] [--quiet]\n"
+    "      a trainee drives the needle from a browser in real time (docs/live.md); the session\n"
+    "      is scored and its controls recorded as `run` does\n"
     "  needlesim validate [CASE...] [--json] [--list]\n"
     "      run the built-in validation cases (docs/validation.md); exit 1 if any fails\n"
     "  needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--set KEY=VALUE]\n"
@@ -78,6 +82,8 @@ int main(int argc, char **argv)
         return ns_cmd_run(argc - 1, argv + 1);
     if (strcmp(cmd, "bench") == 0)
         return ns_cmd_bench(argc - 1, argv + 1);
+    if (strcmp(cmd, "live") == 0)
+        return ns_cmd_live(argc - 1, argv + 1);
     if (cmd[0] == '-')
         fprintf(stderr, "needlesim: unknown option '%s' (needlesim --help)\n", cmd);
     else

@@ -398,7 +398,12 @@ static int run_length(NsRun *r, char *err, int err_sz)
         }
         max_steps = (long)n;
     }
-    double cap_n = ceil(NS_LIMIT_DEFAULT_SIM_TIME / sp->dt - 1e-9);
+    /* A live session's log (#source live) may end before the duration: its replay ends there. */
+    if (r->opt.replay && r->replay.live && (max_steps == 0 || max_steps > r->replay.n))
+        max_steps = r->replay.n;
+    /* A live session without a duration lasts until the trainee ends it, up to an hour. */
+    double cap_s = r->opt.live ? NS_LIMIT_SIM_TIME_MAX : NS_LIMIT_DEFAULT_SIM_TIME;
+    double cap_n = ceil(cap_s / sp->dt - 1e-9);
     long time_cap = cap_n < (double)NS_LIMIT_STEPS ? (long)cap_n : NS_LIMIT_STEPS;
     r->max_steps = max_steps;
     r->time_cap = time_cap;
@@ -413,6 +418,7 @@ int ns_run_begin(NsRun *r, char *err, int err_sz)
     r->tty = !r->opt.quiet && isatty(fileno(stderr));
     r->more = 1;
     r->needles = 1;
+    r->live_scripted = r->opt.live && r->spec.live_script && r->spec.has_script;
     r->t0 = ns_wall_s();
     /* (a resumed run's first frame is of the checkpoint's world: ns_run_checkpoint_resume) */
     if (r->rendering && (r->opt.frames || r->opt.video) && !r->opt.resume &&
@@ -427,6 +433,12 @@ static int tick_controls(NsRun *r, const NsControl *given, double t, NsControl *
                          int err_sz)
 {
     memset(ctl, 0, sizeof *ctl);
+    if (given && r->opt.live) { /* on_tick (and a live.script set-up) run; the session goes on */
+        int more = 1;
+        int rc = ns_run_script_tick(r, t, r->exited, given, &more, ctl, err, err_sz);
+        r->more = 1;
+        return rc;
+    }
     if (given) {
         *ctl = *given;
         return 0;
@@ -442,7 +454,7 @@ static int tick_controls(NsRun *r, const NsControl *given, double t, NsControl *
             *ctl = r->replay.rows[r->steps];
         return 0;
     }
-    return ns_run_script_tick(r, t, r->exited, &r->more, ctl, err, err_sz);
+    return ns_run_script_tick(r, t, r->exited, NULL, &r->more, ctl, err, err_sz);
 }
 
 /* Applies the controls and takes one coupled step (paper Algorithm 1, sim/), then the run's
@@ -618,7 +630,7 @@ int ns_run_load(NsRun *r, char *err, int err_sz)
     /* `sim` and the actions module are set up also without a script (on_tick uses them). */
     rc = rc ? rc : ns_run_script_start(r, err, err_sz);
     if (rc == 0 && !r->spec.has_script && r->spec.duration <= 0.0 && r->opt.steps == 0 &&
-        !r->opt.replay) {
+        !r->opt.replay && !r->opt.live) {
         ns_set_err(err, err_sz,
                    "%s: ns.scenario: without a script the run needs a duration (or --steps N) "
                    "to know when to stop",

@@ -24,6 +24,7 @@ typedef struct NsRunOpts {
      * another scenario file */
     const char *trainee, *session;
     bool rescore;
+    bool live;            /* a live session (docs/live.md): controls come given to ns_run_tick */
     const char *sets[32]; /* --set KEY=VALUE */
     int nsets;
     long steps; /* 0: the scenario decides */
@@ -110,6 +111,7 @@ typedef struct NsRun {
     bool tty;            /* progress on stderr */
     double t0;           /* the loop's start (ns_wall_s) */
     bool stop_when_done; /* bench: the script's end ends the run even before --steps */
+    bool live_scripted;  /* live: the scenario's script drives still (live.script) */
     FILE *traj;
     /* pictures */
     bool rendering;
@@ -137,6 +139,9 @@ typedef struct NsRun {
     FILE *resume_f; /* --resume: the checkpoint, read in two parts (header, then the rest) */
     struct NsPack *resume_pack;
     struct NsCheckpointHeader *resume_hdr;
+    /* report.json: more keys at its end (a live session's `live`), or NULL */
+    void (*report_extra)(NsJson *j, void *ctx);
+    void *report_ctx;
 } NsRun;
 
 enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT };
@@ -188,8 +193,10 @@ int ns_run_loop(NsRun *r, char *err, int err_sz);
 void ns_run_free(NsRun *r);
 /* engine/run_script.c: the Lua bridge (the `sim` table, the script's coroutine, on_tick) */
 int ns_run_script_start(NsRun *r, char *err, int err_sz);
-int ns_run_script_tick(NsRun *r, double t, int exited, int *more, NsControl *ctl, char *err,
-                       int err_sz);
+/* given: a live session's controls, which on_tick sees in sim.control and may change (the
+ * script is not resumed unless live.script has it drive until it ends: r->live_scripted). */
+int ns_run_script_tick(NsRun *r, double t, int exited, const NsControl *given, int *more,
+                       NsControl *ctl, char *err, int err_sz);
 int ns_run_script_replay_tick(NsRun *r, long k, char *err, int err_sz);
 /* engine/run_checkpoint.c: checkpoints (docs/checkpoints.md) */
 int ns_run_views_push(NsRun *r, const NsTickView *v, const double *tx);
@@ -210,7 +217,18 @@ void ns_run_outputs_remove(NsRun *r);
 /* engine/run_score.c: scoring the placement */
 double ns_run_dist_mm(const double *a, const double *b);
 int ns_run_score(NsRun *r, NsRunResults *res);
+/* The score of the state now, the lookups' hints left as they were (pictures, live frames):
+ * what is looked at, and how often, must not change the final score's last bits. */
+int ns_run_score_peek(NsRun *r, NsRunResults *res);
 void ns_run_results_free(NsRunResults *res);
+/* engine/cmd_run.c: --record's path checked against the run's other files; the control logs
+ * opened (a --replay read and checked, a --record started) */
+int ns_run_check_record_path(const NsRunOpts *o);
+/* The same for any output path the command line names (flag: its option, for the message). */
+int ns_run_check_out_path(const NsRunOpts *o, const char *out, const char *flag);
+/* A --set KEY=VALUE added to o: NULL, or why not (a format with one %s, the value). */
+const char *ns_run_opt_set(NsRunOpts *o, const char *v);
+int ns_run_open_logs(NsRun *r, char *err, int err_sz);
 /* engine/run_report.c: report.json */
 void ns_run_stats_object(NsJson *j, const char *key, const NsSeries *s);
 void ns_run_json_vec(NsJson *j, const char *key, const double *v);

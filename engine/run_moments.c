@@ -113,25 +113,8 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
         }
         r->changed = c;
     }
-    if (!res) {
-        /* ns_run_score moves the lookups' starting tets (hints); a target on a face between two
-         * tets may then be found in the other one, and the final score would depend on the
-         * frames drawn. Drawing leaves them as they were. */
-        int nt = sp->target_count,
-            *hints = malloc(((size_t)nt + (size_t)r->seed_n + 1) * sizeof *hints);
-        if (!hints) {
-            ns_set_err(err, err_sz, "out of memory");
-            return -1;
-        }
-        memcpy(hints, r->target_hint, (size_t)nt * sizeof *hints);
-        for (int k = 0; k < r->seed_n; k++)
-            hints[nt + k] = r->seeds[k].hint;
-        int bad = ns_run_score(r, &own);
-        memcpy(r->target_hint, hints, (size_t)nt * sizeof *hints);
-        for (int k = 0; k < r->seed_n; k++)
-            r->seeds[k].hint = hints[nt + k];
-        free(hints);
-        if (bad) {
+    if (!res) { /* drawing leaves the hints as they were (ns_run_score_peek) */
+        if (ns_run_score_peek(r, &own)) {
             ns_run_results_free(&own);
             ns_set_err(err, err_sz, "out of memory");
             return -1;

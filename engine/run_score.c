@@ -106,6 +106,29 @@ int ns_run_score(NsRun *r, NsRunResults *res)
     return 0;
 }
 
+int ns_run_score_peek(NsRun *r, NsRunResults *res)
+{
+    /* ns_run_score moves the lookups' starting tets (hints); a target on a face between two
+     * tets may then be found in the other one, and the final score would depend on how often
+     * the state was looked at. */
+    const NsRunSpec *sp = &r->spec;
+    int nt = sp->target_count,
+        *hints = malloc(((size_t)nt + (size_t)r->seed_n + 1) * sizeof *hints);
+    if (!hints) {
+        memset(res, 0, sizeof *res);
+        return -1;
+    }
+    memcpy(hints, r->target_hint, (size_t)nt * sizeof *hints);
+    for (int k = 0; k < r->seed_n; k++)
+        hints[nt + k] = r->seeds[k].hint;
+    int bad = ns_run_score(r, res);
+    memcpy(r->target_hint, hints, (size_t)nt * sizeof *hints);
+    for (int k = 0; k < r->seed_n; k++)
+        r->seeds[k].hint = hints[nt + k];
+    free(hints);
+    return bad;
+}
+
 void ns_run_results_free(NsRunResults *res)
 {
     free(res->targets);

@@ -64,6 +64,7 @@ typedef struct TickIO {
     int exited;
     const NsTickView *view; /* a resumed run's replay: what the script saw then, else NULL */
     const double *view_tx;  /* ... and the targets it saw (3 per target) */
+    const NsControl *given; /* a live session's controls (NULL: the script's) */
     int more;               /* out: the script has more to do */
     NsControl ctl;          /* out: the controls for this step */
 } TickIO;
@@ -349,8 +350,33 @@ static int read_controls(lua_State *L, TickIO *io, int ci)
     return 0;
 }
 
-/* (io) -> (): updates `sim`, resumes the script for one step, calls on_tick, reads the
- * controls (raw accesses only: metatables a script sets do not run here). */
+/* A live session's controls into sim.control (at stack index ci), for on_tick to see and
+ * change: the trainee's speeds and this step's events. */
+static void seed_controls(lua_State *L, int ci, const NsControl *g)
+{
+    set_num(L, ci, "v_insert", g->v_insert);
+    set_num(L, ci, "twist_rate", g->twist_rate);
+    set_vec(L, ci, "base_velocity", g->v_base);
+    lua_pushstring(L, "drop_seed");
+    lua_pushboolean(L, g->drop_seed);
+    lua_rawset(L, ci);
+    lua_pushstring(L, "next_needle");
+    if (g->next_needle) {
+        lua_createtable(L, 0, 3);
+        int ni = lua_gettop(L);
+        set_vec(L, ni, "point", g->entry.point);
+        set_vec(L, ni, "direction", g->entry.direction);
+        if (g->entry.has_bevel_toward)
+            set_vec(L, ni, "bevel_toward", g->entry.bevel_toward);
+    } else {
+        lua_pushnil(L);
+    }
+    lua_rawset(L, ci);
+}
+
+/* (io) -> (): updates `sim`, resumes the script for one step (in a live session only while
+ * live.script has it drive), calls on_tick, reads the controls (raw accesses only: metatables a
+ * script sets do not run here). */
 static int tick_body(lua_State *L)
 {
     TickIO *io = lua_touserdata(L, 1);
@@ -361,19 +387,25 @@ static int tick_body(lua_State *L)
         fill_sim(L, io, si, io->view, io->view_tx);
     } else {
         NsTickView v;
-        double *tx = lua_newuserdatauv(L, sizeof(double) * 3 * (size_t)(r->spec.target_count + 1), 0);
+        double *tx =
+            lua_newuserdatauv(L, sizeof(double) * 3 * (size_t)(r->spec.target_count + 1), 0);
         view_of_run(L, io, &v, tx);
         fill_sim(L, io, si, &v, tx);
         lua_pop(L, 1);
         if (r->keep_views && ns_run_views_push(r, &v, tx) != 0)
             return luaL_error(L, "needlesim: out of memory");
     }
-    resume_script(L, io);
+    bool scripted = !io->given || r->live_scripted;
+    if (scripted)
+        resume_script(L, io);
     lua_pushstring(L, "control");
     if (lua_rawget(L, si) != LUA_TTABLE)
         return luaL_error(L, "%s: sim.control must stay a table", r->sc.path);
     int ci = lua_gettop(L);
-    if (!io->more && r->spec.has_script) { /* the script ended: the needle stops */
+    if (io->given && !io->more) { /* the trainee drives */
+        r->live_scripted = false;
+        seed_controls(L, ci, io->given);
+    } else if (!io->more && r->spec.has_script) { /* the script ended: the needle stops */
         set_num(L, ci, "v_insert", 0.0);
         set_num(L, ci, "twist_rate", 0.0);
     }
@@ -389,11 +421,11 @@ static int tick_body(lua_State *L)
 }
 
 /* One step of the script side. *more: the script has more to do; *ctl: the controls. */
-int ns_run_script_tick(NsRun *r, double t, int exited, int *more, NsControl *ctl, char *err,
-                       int err_sz)
+int ns_run_script_tick(NsRun *r, double t, int exited, const NsControl *given, int *more,
+                       NsControl *ctl, char *err, int err_sz)
 {
     lua_State *L = ns_lua_state(r->sc.lua);
-    TickIO io = {.r = r, .t = t, .step = r->steps, .exited = exited};
+    TickIO io = {.r = r, .t = t, .step = r->steps, .exited = exited, .given = given};
     lua_pushcfunction(L, tick_body);
     lua_pushlightuserdata(L, &io);
     int rc = ns_lua_call(r->sc.lua, 1, 0, err, err_sz);

@@ -229,6 +229,7 @@ void ns_run_spec_free(NsRunSpec *spec)
         free(spec->obstacles[i].name);
     free(spec->obstacles);
     free(spec->seed_target);
+    free(spec->live_entries);
     memset(spec, 0, sizeof *spec);
 }
 
@@ -267,6 +268,55 @@ bad(char *err, int err_sz, const char *where, const char *fmt, ...)
  * checked when the table was made: a scenario can change its tables afterwards (sc.dt = 0,
  * camera.frame_every = 0, entry.point = {"a"}), and a bad value must be named, not divided
  * by. Ranges: sim/ns_limits.h and the constructors' own. */
+/* live = {script, entries} (the Lua side checked the shapes; the values are checked here). */
+static int read_live(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int si, char *err,
+                     int err_sz)
+{
+    if (raw_field(L, si, "live") != LUA_TTABLE)
+        return 0;
+    int li = lua_gettop(L);
+    spec->live_script = bool_field(L, li, "script", false);
+    if (raw_field(L, li, "entries") != LUA_TTABLE)
+        return 0;
+    int ei = lua_gettop(L);
+    int n = (int)lua_rawlen(L, ei);
+    if (n < 0 || n > 64) {
+        ns_set_err(err, err_sz, "%s: ns.scenario: live.entries: at most 64", sc->where);
+        return -1;
+    }
+    spec->live_entries = calloc((size_t)n + 1, sizeof *spec->live_entries);
+    if (!spec->live_entries) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    for (int i = 0; i < n; i++) {
+        NsEntry *e = &spec->live_entries[i];
+        lua_rawgeti(L, ei, i + 1);
+        int ti = lua_gettop(L);
+        bool table = lua_istable(L, ti);
+        if (table) {
+            vec_field(L, ti, "point", e->point);
+            vec_field(L, ti, "direction", e->direction);
+            raw_field(L, ti, "bevel_toward");
+            e->has_bevel_toward = lua_istable(L, -1);
+            lua_pop(L, 1);
+            if (e->has_bevel_toward)
+                vec_field(L, ti, "bevel_toward", e->bevel_toward);
+        }
+        lua_pop(L, 1);
+        if (!table || !finite3(e->point) || !nonzero3(e->direction) ||
+            (e->has_bevel_toward && !nonzero3(e->bevel_toward))) {
+            ns_set_err(err, err_sz,
+                       "%s: ns.scenario: live.entries[%d] must be {point = {x, y, z}, direction "
+                       "= {x, y, z}}: finite numbers, the direction not zero",
+                       sc->where, i + 1);
+            return -1;
+        }
+        spec->live_entry_count = i + 1;
+    }
+    return 0;
+}
+
 static int check_spec(const NsScenario *sc, const NsRunSpec *s, char *err, int err_sz)
 {
     const char *w = sc->where;
@@ -494,6 +544,9 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         free(f);
         free(l);
     }
+    lua_settop(L, si);
+    if (rc == 0)
+        rc = read_live(sc, spec, L, si, err, err_sz);
     lua_settop(L, si);
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);

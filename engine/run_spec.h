@@ -7,6 +7,7 @@
 
 #include <stdbool.h>
 
+#include "control_log.h"
 #include "scenario.h"
 
 typedef struct NsRunTarget {
@@ -69,6 +70,11 @@ typedef struct NsRunSpec {
      * its measured tip error [m] and cost [ms per simulated s] */
     double accuracy, accuracy_tip_error, accuracy_cost;
     char accuracy_front[32], accuracy_label[96];
+    /* live = {script, entries} (docs/live.md): a live session runs the script first only with
+     * live_script; {"next_needle": true} takes live_entries in turn (none: the entry above) */
+    bool live_script;
+    NsEntry *live_entries;
+    int live_entry_count;
 } NsRunSpec;
 
 /* Reads sc's run fields. Returns 0, or -1 with one line naming the scenario's file and line

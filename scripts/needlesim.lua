@@ -917,7 +917,7 @@ end
 
 local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "duration", "needle",
     "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
-    "accuracy", "solver" }
+    "accuracy", "solver", "live" }
 -- Accepted now and checked by the stages that use them (later versions).
 local RESERVED = {}
 
@@ -931,6 +931,7 @@ local CAMERA_FIELDS = { "views", "fps", "frame_every", "cut_normal", "tet_edges"
 local VIEWS = { side = true, top = true, axis = true }
 local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold", "tip_block" }
 local ACCURACY_FIELDS = { "tip", "front" }
+local LIVE_FIELDS = { "script", "entries" }
 
 --- ns.economy(tip, front): the cheapest settings on a measured speed-against-accuracy front
 --- (scripts/needlesim/fronts.lua, written by tools/speed_accuracy.py) whose measured error
@@ -1100,11 +1101,11 @@ local function list_of(v, where, field, fields, one, named)
 end
 
 -- entry = {point, direction}: where the needle's sleeve meets the skin and the way it points.
-local function entry_of(v, where)
+local function entry_of(v, where, ctor)
     if v == nil then
         return nil
     end
-    local a = args(v, "ns.scenario: entry", where, ENTRY_FIELDS)
+    local a = args(v, ctor or "ns.scenario: entry", where, ENTRY_FIELDS)
     local e = { point = a:vec3("point", ANY, " [m]"), direction = a:vec3("direction", ANY, "") }
     local d = e.direction
     local len = math.sqrt(d[1] * d[1] + d[2] * d[2] + d[3] * d[3])
@@ -1146,6 +1147,30 @@ local function targets_of(v, where)
         out[i] = tg
     end
     return out
+end
+
+-- live = {script, entries}: what a live session (`needlesim live`, docs/live.md) takes from the
+-- scenario. script = true runs the scenario's script first (a scripted set-up) and hands the
+-- needle to the trainee when it ends (default false: the trainee drives from the start);
+-- entries = {{point, direction, bevel_toward}, ...}: where each {"next_needle": true} puts
+-- the next needle, in turn (default: the scenario's entry again).
+local function live_of(v, where)
+    if v == nil then
+        return nil
+    end
+    local a = args(v, "ns.scenario: live", where, LIVE_FIELDS)
+    local l = { script = a:boolean("script", false), entries = {} }
+    local es = a:get("entries")
+    if es ~= nil then
+        if type(es) ~= "table" or kind_of(es) or #es < 1 or #es > 64 then
+            a:fail("entries must be a list of 1 to 64 entries {point, direction} (got %s)",
+                describe(es))
+        end
+        for i, e in ipairs(es) do
+            l.entries[i] = entry_of(e, where, fmt("ns.scenario: live.entries[%d]", i))
+        end
+    end
+    return l
 end
 
 --- ns.scenario{name, tissue, description, seed, dt, duration, script, on_tick, ...}
@@ -1208,6 +1233,7 @@ function ns.scenario(t)
             lazy_threshold = e.lazy_threshold }
     end
     sc.camera = camera_of(t.camera, where, sc.dt or 0.01)
+    sc.live = live_of(t.live, where)
     for _, k in ipairs(RESERVED) do
         sc[k] = t[k]
     end

@@ -79,6 +79,17 @@
  * every node at every lattice vertex. */
 #define NS_LIMIT_SHAPE_NODES 10000
 
+/* ---- live sessions (docs/live.md) ------------------------------------------------------------ */
+
+/* One client message [bytes]: the largest control message is under 100 bytes. */
+#define NS_LIMIT_LIVE_MESSAGE_BYTES 4096
+/* WebSocket clients (one controls, the others watch) and MJPEG viewers at once: each holds a
+ * server thread and a sender thread. */
+#define NS_LIMIT_LIVE_CLIENTS 8
+#define NS_LIMIT_LIVE_VIEWERS 8
+/* Frames a second a session may be asked for, and its frame size [pixels] (as --width). */
+#define NS_LIMIT_LIVE_FPS 120
+
 /* ---- names -------------------------------------------------------------------------------- */
 
 /* Names that end up in CSV headers and JSON (targets, markers, obstacles, regions) [bytes]. */

@@ -1,0 +1,199 @@
+#!/bin/bash
+# `needlesim live` end to end (docs/live.md), driven by a scripted client (tests/live_client.py,
+# apt's python3-websockets): the page, 404s, the MJPEG stream, JPEG frames and state messages
+# over the WebSocket, the depth growing while inserting, hostile messages answered with errors
+# while the session goes on, a watcher's controls refused, a disconnect and reconnect, the end
+# from the client; then the outputs, the report's `live` keys, and `needlesim run --replay` of
+# the recorded log giving the same state hash and score. Second, a session bound to 0.0.0.0
+# needs its token (401 without) and ends on SIGTERM with its outputs written. Usage errors exit
+# 2. Every server started is stopped by the test (trap), whatever happens.
+#
+# usage: tests/test_live.sh NEEDLESIM_BINARY SOURCE_DIR
+set -u
+
+BIN=${1:?usage: test_live.sh NEEDLESIM_BINARY SOURCE_DIR}
+SRC=${2:?usage: test_live.sh NEEDLESIM_BINARY SOURCE_DIR}
+PY=/usr/bin/python3 # apt's, with python3-websockets (not a pyenv's)
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-live.XXXXXX") || exit 1
+PIDS=()
+cleanup() {
+    for p in "${PIDS[@]}"; do
+        kill -KILL "$p" 2>/dev/null
+    done
+    rm -rf "$TMP"
+}
+trap cleanup EXIT
+PASSED=0
+FAILED=0
+pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
+fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
+
+# start NAME ARGS...: starts a session in the background; its URL in $URL (empty on failure).
+start() {
+    local name=$1
+    shift
+    "$BIN" live "$@" >"$TMP/$name.out" 2>"$TMP/$name.err" &
+    PID=$!
+    PIDS+=("$PID")
+    URL=""
+    for _ in $(seq 1 600); do # liveness: up to 120 s to build the scenario and listen
+        URL=$(sed -n '1s/^needlesim live: open //p' "$TMP/$name.out")
+        [ -n "$URL" ] && return 0
+        kill -0 "$PID" 2>/dev/null || return 1
+        sleep 0.2
+    done
+    return 1
+}
+
+# wait_exit PID SECONDS: the process's exit status, or 124 after SECONDS (then it is killed).
+wait_exit() {
+    local pid=$1 n=$(($2 * 5))
+    for _ in $(seq 1 "$n"); do
+        if ! kill -0 "$pid" 2>/dev/null; then
+            wait "$pid"
+            return $?
+        fi
+        sleep 0.2
+    done
+    kill -KILL "$pid" 2>/dev/null
+    return 124
+}
+
+# ---- usage errors ----
+"$BIN" live >/dev/null 2>&1
+[ $? -eq 2 ] && pass "no scenario: exit 2" || fail "no scenario" "expected exit 2"
+"$BIN" live "$SRC/scenarios/tutorial.lua" --port 70000 >/dev/null 2>&1
+[ $? -eq 2 ] && pass "--port 70000: exit 2" || fail "--port 70000" "expected exit 2"
+"$BIN" live "$SRC/scenarios/tutorial.lua" --width 33 >/dev/null 2>&1
+[ $? -eq 2 ] && pass "--width 33: exit 2" || fail "--width 33" "expected exit 2"
+
+# ---- a session driven by the scripted client ----
+OUT="$TMP/session"
+if start session "$SRC/scenarios/tutorial.lua" --port 0 -o "$OUT" --width 480 --height 270; then
+    pass "session: the URL line"
+    case "$URL" in
+    http://127.0.0.1:*/) pass "session: bound to 127.0.0.1, no token" ;;
+    *) fail "session: URL" "$URL" ;;
+    esac
+    if "$PY" "$SRC/tests/live_client.py" session "$URL"; then
+        pass "session: the client's checks"
+    else
+        fail "session: the client's checks" "see above"
+    fi
+    wait_exit "$PID" 120
+    rc=$?
+    [ $rc -eq 0 ] && pass "session: exit 0 after the client's end" ||
+        fail "session: exit" "$rc: $(tail -3 "$TMP/session.err")"
+else
+    fail "session: start" "$(tail -3 "$TMP/session.err")"
+fi
+for f in report.json trajectory.csv summary.png controls.csv; do
+    [ -s "$OUT/$f" ] && pass "session: $f written" || fail "session: $f" "missing"
+done
+if "$PY" - "$OUT/report.json" <<'PY'; then
+import json, math, sys
+r = json.load(open(sys.argv[1]))
+live = r["live"]
+for k, sub in (("fps", ("median", "p5")), ("rtf", ("median", "min")),
+               ("input_latency_ms", ("median", "p95")), ("frame_ms", ("render", "encode"))):
+    for s in sub:
+        assert isinstance(live[k][s], (int, float)) and math.isfinite(live[k][s]), (k, s)
+assert live["clients"] >= 3, live["clients"]
+assert live["ended_by"] == "client", live["ended_by"]
+assert r["needle"]["depth_m"] > 0.004, r["needle"]["depth_m"]
+assert len(r["seeds"]) >= 1, r["seeds"]
+PY
+    pass "session: report.json has the live keys and the session's outcome"
+else
+    fail "session: report.json" "live keys or outcome"
+fi
+grep -q '^#source live$' "$OUT/controls.csv" && pass "session: the log says #source live" ||
+    fail "session: log" "no #source live"
+
+# ---- its replay: the same state hash and score ----
+if "$BIN" run "$SRC/scenarios/tutorial.lua" --replay "$OUT/controls.csv" -o "$TMP/replay" \
+    --no-render --quiet 2>"$TMP/replay.err"; then
+    if "$PY" - "$OUT/report.json" "$TMP/replay/report.json" <<'PY'; then
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+assert a["state_hash"] == b["state_hash"], (a["state_hash"], b["state_hash"])
+assert a["score"]["total"] == b["score"]["total"], (a["score"], b["score"])
+assert a["steps"] == b["steps"], (a["steps"], b["steps"])
+PY
+        pass "replay: the same state hash, score and steps"
+    else
+        fail "replay" "state hash, score or steps differ"
+    fi
+else
+    fail "replay" "$(tail -2 "$TMP/replay.err")"
+fi
+
+# ---- live = {script = true}: the scenario's set-up drives, then the trainee; its replay ----
+sed -e 's|^    script = function()|    live = { script = true },\n    script = function()|' \
+    -e 's|act.insert { speed = 0.02, depth = 0.03 }.*|act.insert { speed = 0.02, depth = 0.004 }|' \
+    -e '/act.wait { time = 0.2 }/d' "$SRC/scenarios/tutorial.lua" >"$TMP/scripted.lua"
+OUT3="$TMP/scripted"
+if start scripted "$TMP/scripted.lua" --port 0 -o "$OUT3" --width 320 --height 180; then
+    if "$PY" "$SRC/tests/live_client.py" scripted "$URL"; then
+        pass "scripted: the set-up drives, then the client"
+    else
+        fail "scripted" "see above"
+    fi
+    wait_exit "$PID" 120
+    rc=$?
+    [ $rc -eq 0 ] && pass "scripted: exit 0" || fail "scripted: exit" "$rc"
+    if "$BIN" run "$TMP/scripted.lua" --replay "$OUT3/controls.csv" -o "$TMP/replay3" \
+        --no-render --quiet 2>"$TMP/replay3.err" &&
+        "$PY" - "$OUT3/report.json" "$TMP/replay3/report.json" <<'PY'; then
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+assert a["state_hash"] == b["state_hash"] and a["score"]["total"] == b["score"]["total"]
+PY
+        pass "scripted: the replay gives the same state hash and score"
+    else
+        fail "scripted: replay" "$(tail -2 "$TMP/replay3.err")"
+    fi
+else
+    fail "scripted: start" "$(tail -3 "$TMP/scripted.err")"
+fi
+
+# ---- bound elsewhere: the token; SIGTERM ends the session with its outputs ----
+OUT2="$TMP/token"
+if start token "$SRC/scenarios/tutorial.lua" --bind 0.0.0.0 --port 0 -o "$OUT2" \
+    --width 320 --height 180 --record "$TMP/token.csv"; then
+    if "$PY" "$SRC/tests/live_client.py" token "$URL"; then
+        pass "token: required on every request (401 without)"
+    else
+        fail "token" "see above"
+    fi
+    kill -TERM "$PID"
+    wait_exit "$PID" 120
+    rc=$?
+    [ $rc -eq 0 ] && pass "token: SIGTERM ends the session, exit 0" ||
+        fail "token: SIGTERM" "exit $rc: $(tail -3 "$TMP/token.err")"
+    [ -s "$OUT2/report.json" ] && [ -s "$TMP/token.csv" ] &&
+        grep -q '"ended_by": "signal"' "$OUT2/report.json" &&
+        pass "token: report.json and --record's log written" ||
+        fail "token: outputs" "missing, or not ended by the signal"
+else
+    fail "token: start" "$(tail -3 "$TMP/token.err")"
+fi
+
+# ---- bench --live: its synthetic client drives a session end to end ----
+if (timeout 300 "$BIN" bench --live "$SRC/scenarios/tutorial.lua" --seconds 3 \
+    --json --width 320 --height 180 -o "$TMP/bench" >"$TMP/bench.json" 2>"$TMP/bench.err") &&
+    "$PY" - "$TMP/bench.json" <<'PY'; then
+import json, sys
+b = json.load(open(sys.argv[1]))
+for k in ("delivered_fps_median", "rtf_median", "input_latency_ms_p95", "render_ms",
+          "encode_ms", "step_ms", "frames_received", "state_hash"):
+    assert k in b, k
+assert b["frames_received"] >= 1 and len(b["state_hash"]) == 16, b
+PY
+    pass "bench --live: a session driven by its client, the figures printed"
+else
+    fail "bench --live" "$(tail -3 "$TMP/bench.err")"
+fi
+
+echo "$PASSED passed, $FAILED failed"
+[ "$FAILED" -eq 0 ]
