@@ -169,8 +169,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             double t = strtod(v, &end);
             if (*end || !(t > 0.0) || !(t <= NS_LIMIT_SIM_TIME_MAX))
                 return usage_error("--checkpoint-at '%s': expected a time in seconds, > 0", v);
-            if (!argv[i + 2][0])
-                return usage_error("%s: expected a path, got an empty string", a);
+            if (!argv[i + 2][0] || argv[i + 2][0] == '-')
+                return usage_error("--checkpoint-at T FILE: expected a file, got '%s'", argv[i + 2]);
             o->checkpoint_at = t;
             o->checkpoint = argv[i + 2];
             i += 2;
@@ -343,6 +343,18 @@ int ns_run_check_out_path(const NsRunOpts *o, const char *out, const char *flag)
     if (!out)
         return 0;
     char msg[200];
+    if (out == o->checkpoint) { /* said now, not at T: a folder, a device, a missing folder */
+        char why[200];
+        const char *slash = strrchr(out, '/');
+        char dir[PATH_MAX];
+        snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - out == 0 ? 1 : slash - out) : 1,
+                 slash ? out : ".");
+        struct stat ds;
+        if (ns_out_replaceable(out, "--checkpoint-at", why, (int)sizeof why) != 0)
+            return usage_error("%s", why);
+        if (stat(dir, &ds) != 0 || !S_ISDIR(ds.st_mode))
+            return usage_error("--checkpoint-at '%s': its folder does not exist", out);
+    }
     struct stat rs, st;
     bool exists = stat(out, &rs) == 0;
     const char *inputs[3] = {o->scenario, o->replay, o->resume};
@@ -400,7 +412,7 @@ int ns_cmd_run(int argc, char **argv)
         rc = -2;
     r.keep_views = r.opt.checkpoint && !r.opt.replay;
     if (rc == -1 && ns_run_load(&r, err, sizeof err) == 0)
-        rc = 0;
+        rc = ns_run_checkpoint_hash_inputs(&r, err, sizeof err);
     rc = rc ? rc : ns_run_open_logs(&r, err, sizeof err);
     if (rc == 0)
         ns_run_traj_header(&r);

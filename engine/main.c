@@ -23,7 +23,7 @@ static const char usage[] =
     "  needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]\n"
     "                [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv] [--quiet]\n"
     "                [--no-render | [--frames] [--video FILE.mp4] [--width W] [--height H]\n"
-    "                [--frame-every K]]\n"
+    "                [--frame-every K]] [--checkpoint-at T FILE] [--resume FILE]\n"
     "      run the scenario's script, score its targets, write DIR/report.json,\n"
     "      DIR/trajectory.csv and DIR/summary.png (and frames, a video: docs/rendering.md)\n"
     "  needlesim live SCENARIO.lua [--port N] [--bind ADDR] [--width W --height H] [--fps F]\n"

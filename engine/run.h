@@ -139,6 +139,7 @@ typedef struct NsRun {
     FILE *resume_f; /* --resume: the checkpoint, read in two parts (header, then the rest) */
     struct NsPack *resume_pack;
     struct NsCheckpointHeader *resume_hdr;
+    uint64_t ck_scenario_hash, ck_replay_hash; /* of the files as loaded (checkpoint header) */
     /* report.json: more keys at its end (a live session's `live`), or NULL */
     void (*report_extra)(NsJson *j, void *ctx);
     void *report_ctx;
@@ -206,6 +207,8 @@ int ns_run_checkpoint_open(NsRun *r, char *err, int err_sz);
 /* --resume, after ns_run_begin: the world, the run's state and its script brought to the
  * checkpoint's step. */
 int ns_run_checkpoint_resume(NsRun *r, char *err, int err_sz);
+/* --checkpoint-at: the scenario file's (and replayed log's) hash, taken right after loading. */
+int ns_run_checkpoint_hash_inputs(NsRun *r, char *err, int err_sz);
 /* --checkpoint-at: after each step; writes the checkpoint at the first step at or after T. */
 int ns_run_checkpoint_maybe(NsRun *r, char *err, int err_sz);
 void ns_run_checkpoint_free(NsRun *r);

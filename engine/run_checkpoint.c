@@ -11,6 +11,8 @@
  * tick by tick against the views it saw then (the `sim` table rebuilt from them, no physics
  * stepped), checking that it sets the same controls each tick; a script is a function of what
  * `sim` shows it, so it arrives where it was. */
+#include <elf.h>
+#include <link.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -32,6 +34,7 @@ typedef struct NsCheckpointHeader {
     char magic[8];
     uint64_t fingerprint;   /* ns_pack_fingerprint of the writer */
     char version[64];       /* NS_VERSION */
+    unsigned char build_id[32]; /* the writer's ELF build ID (its first 32 bytes; 0s if none) */
     uint64_t scenario_hash; /* FNV-1a of the scenario file's bytes (control_log.h) */
     uint64_t replay_hash;   /* of the --replay log, 0 without one */
     int nsets;
@@ -41,6 +44,39 @@ typedef struct NsCheckpointHeader {
     long steps; /* steps taken at the checkpoint */
     double dt, t;
 } NsCheckpointHeader;
+
+/* The program's ELF build ID (the linker's hash of the binary): a checkpoint is read only by the
+ * binary that wrote it, whose structures' layouts are the file's. */
+static int note_of(struct dl_phdr_info *info, size_t size, void *data)
+{
+    (void)size;
+    unsigned char *id = data;
+    for (int i = 0; i < info->dlpi_phnum; i++) {
+        const ElfW(Phdr) *ph = &info->dlpi_phdr[i];
+        if (ph->p_type != PT_NOTE)
+            continue;
+        const unsigned char *n = (const unsigned char *)(info->dlpi_addr + ph->p_vaddr);
+        size_t off = 0;
+        while (off + sizeof(ElfW(Nhdr)) <= ph->p_memsz) {
+            const ElfW(Nhdr) *nh = (const ElfW(Nhdr) *)(n + off);
+            size_t name = (nh->n_namesz + 3) & ~(size_t)3, desc = (nh->n_descsz + 3) & ~(size_t)3;
+            const unsigned char *d = n + off + sizeof *nh + name;
+            if (nh->n_type == NT_GNU_BUILD_ID && nh->n_namesz == 4 &&
+                memcmp(n + off + sizeof *nh, "GNU", 4) == 0) {
+                memcpy(id, d, nh->n_descsz < 32 ? nh->n_descsz : 32);
+                return 1;
+            }
+            off += sizeof *nh + name + desc;
+        }
+    }
+    return 1; /* the first object is the program itself */
+}
+
+static void build_id(unsigned char id[32])
+{
+    memset(id, 0, 32);
+    dl_iterate_phdr(note_of, id);
+}
 
 int ns_run_views_push(NsRun *r, const NsTickView *v, const double *tx)
 {
@@ -112,6 +148,11 @@ static int run_state_pack(NsPack *p, NsRun *r)
     NS_PACK(p, r->entered);
     NS_PACK(p, r->peak_axial);
     NS_PACK(p, r->punctures);
+    /* the current needle's entry (act.next_needle replaces the scenario's) */
+    NS_PACK(p, r->spec.entry_point);
+    NS_PACK(p, r->spec.entry_dir);
+    NS_PACK(p, r->spec.has_bevel_toward);
+    NS_PACK(p, r->spec.bevel_toward);
     NsSeries *s[8] = {&r->step_ms,   &r->total_ms,  &r->lcp_ms, &r->tissue_ms,
                       &r->needle_ms, &r->remesh_ms, &r->trials, &r->iterations};
     for (int k = 0; k < 8; k++)
@@ -191,11 +232,10 @@ static int header_fill(NsRun *r, NsCheckpointHeader *h, char *err, int err_sz)
     memcpy(h->magic, CHECKPOINT_MAGIC, 8);
     h->fingerprint = ns_pack_fingerprint();
     snprintf(h->version, sizeof h->version, "%s", NS_VERSION);
-    if (ns_file_hash(r->opt.scenario, NS_LIMIT_SCRIPT_FILE_BYTES, "scenario file",
-                     &h->scenario_hash, err, err_sz) ||
-        (r->opt.replay && ns_file_hash(r->opt.replay, NS_LIMIT_LOG_FILE_BYTES, "control log",
-                                       &h->replay_hash, err, err_sz)))
-        return -1;
+    build_id(h->build_id);
+    (void)err, (void)err_sz;
+    h->scenario_hash = r->ck_scenario_hash;
+    h->replay_hash = r->ck_replay_hash;
     h->nsets = r->opt.nsets;
     for (int k = 0; k < r->opt.nsets; k++)
         snprintf(h->sets[k], sizeof h->sets[k], "%s", r->opt.sets[k]);
@@ -206,6 +246,18 @@ static int header_fill(NsRun *r, NsCheckpointHeader *h, char *err, int err_sz)
     h->dt = r->spec.dt;
     h->t = (double)r->steps * r->spec.dt;
     return 0;
+}
+
+int ns_run_checkpoint_hash_inputs(NsRun *r, char *err, int err_sz)
+{
+    if (!r->opt.checkpoint || r->opt.resume) /* a resumed run has the checkpoint's */
+        return 0;
+    return ns_file_hash(r->opt.scenario, NS_LIMIT_SCRIPT_FILE_BYTES, "scenario file",
+                        &r->ck_scenario_hash, err, err_sz) ||
+                   (r->opt.replay && ns_file_hash(r->opt.replay, NS_LIMIT_LOG_FILE_BYTES,
+                                                  "control log", &r->ck_replay_hash, err, err_sz))
+               ? -1
+               : 0;
 }
 
 int ns_run_checkpoint_maybe(NsRun *r, char *err, int err_sz)
@@ -231,6 +283,7 @@ int ns_run_checkpoint_maybe(NsRun *r, char *err, int err_sz)
     NsPack p;
     ns_pack_writer(&p, f);
     ns_pack_bytes(&p, &h, sizeof h);
+    ns_pack_checksum(&p); /* the header's own, checked before anything in it is used */
     run_state_pack(&p, r);
     views_pack(&p, r);
     traj_pack(&p, r);
@@ -246,6 +299,12 @@ int ns_run_checkpoint_maybe(NsRun *r, char *err, int err_sz)
         ns_set_err(err, err_sz, "%s: checkpoint: %s", r->opt.checkpoint, p.err);
     } else {
         r->checkpointed = true;
+        r->keep_views = false; /* one checkpoint a run: the views are not needed again */
+        free(r->views);
+        free(r->view_tx);
+        r->views = NULL;
+        r->view_tx = NULL;
+        r->view_n = r->view_cap = 0;
         if (!r->opt.quiet)
             fprintf(stderr, "%s%s: checkpoint at step %ld (t = %.6g s), %ld bytes\n",
                     r->progress_shown ? "\r\033[K" : "", r->opt.checkpoint, r->steps,
@@ -288,8 +347,15 @@ int ns_run_checkpoint_open(NsRun *r, char *err, int err_sz)
         ns_set_err(err, err_sz, "%s: not a needlesim checkpoint", r->opt.resume);
         return -1;
     }
+    if (ns_pack_checksum(p) != 0) {
+        ns_set_err(err, err_sz, "%s: damaged checkpoint header (%s)", r->opt.resume, p->err);
+        return -1;
+    }
     h->version[sizeof h->version - 1] = '\0';
-    if (h->fingerprint != ns_pack_fingerprint() || strcmp(h->version, NS_VERSION) != 0) {
+    unsigned char id[32];
+    build_id(id);
+    if (h->fingerprint != ns_pack_fingerprint() || strcmp(h->version, NS_VERSION) != 0 ||
+        memcmp(h->build_id, id, sizeof id) != 0) {
         ns_set_err(err, err_sz,
                    "%s: written by another build of needlesim (%s); a checkpoint is read only by "
                    "the build that wrote it",
@@ -313,8 +379,12 @@ int ns_run_checkpoint_open(NsRun *r, char *err, int err_sz)
     }
     /* The settings: the checkpoint's, and any given here must be the same. */
     bool sets_same = r->opt.nsets == 0 || r->opt.nsets == h->nsets;
-    for (int i = 0; sets_same && i < r->opt.nsets; i++)
-        sets_same = strcmp(r->opt.sets[i], h->sets[i]) == 0;
+    for (int i = 0; sets_same && i < r->opt.nsets; i++) {
+        bool found = false;
+        for (int k = 0; k < h->nsets && !found; k++)
+            found = strncmp(r->opt.sets[i], h->sets[k], sizeof h->sets[k]) == 0;
+        sets_same = found;
+    }
     if (!sets_same)
         return mismatch(r, "--set values", err, err_sz);
     if (r->opt.steps && r->opt.steps != h->steps_opt)
@@ -332,11 +402,16 @@ int ns_run_checkpoint_open(NsRun *r, char *err, int err_sz)
         if (lh != h->replay_hash)
             return mismatch(r, "--replay log", err, err_sz);
     }
+    r->opt.nsets = 0; /* the header's, by the command line's rules (the header outlives the run) */
     for (int k = 0; k < h->nsets; k++) {
         h->sets[k][sizeof h->sets[k] - 1] = '\0';
-        r->opt.sets[k] = h->sets[k];
+        if (ns_run_opt_set(&r->opt, h->sets[k]) != NULL) {
+            ns_set_err(err, err_sz, "%s: damaged checkpoint header (--set %d)", r->opt.resume, k);
+            return -1;
+        }
     }
-    r->opt.nsets = h->nsets;
+    r->ck_scenario_hash = h->scenario_hash;
+    r->ck_replay_hash = h->replay_hash;
     r->opt.steps = h->steps_opt;
     r->opt.threads = h->threads;
     r->opt.solver = h->solver;
@@ -357,7 +432,7 @@ int ns_run_checkpoint_resume(NsRun *r, char *err, int err_sz)
     NsPack *p = r->resume_pack;
     const NsCheckpointHeader *h = r->resume_hdr;
     if (h->dt != r->spec.dt) {
-        ns_set_err(err, err_sz, "%s: the checkpoint's dt %g s is not the scenario's %g s",
+        ns_set_err(err, err_sz, "%s: the checkpoint's dt %.17g s is not the scenario's %.17g s",
                    r->opt.resume, h->dt, r->spec.dt);
         return -1;
     }
@@ -387,7 +462,15 @@ int ns_run_checkpoint_resume(NsRun *r, char *err, int err_sz)
             return -1;
     record_rows(r);
     r->keep_views = scripted && r->opt.checkpoint != NULL;
-    ns_run_checkpoint_free(r);
+    if (r->opt.checkpoint && r->opt.checkpoint_at <= h->t) {
+        ns_set_err(err, err_sz, "--checkpoint-at %g s: not after the resumed checkpoint's %g s",
+                   r->opt.checkpoint_at, h->t);
+        return -1;
+    }
+    fclose(r->resume_f); /* the header stays: the run's --set values point into it */
+    r->resume_f = NULL;
+    free(r->resume_pack);
+    r->resume_pack = NULL;
     memcpy(r->last_tip, ns_run_tip(r), sizeof r->last_tip);
     if (r->rendering && (r->opt.frames || r->opt.video))
         return ns_run_render_now(r, NULL, false, NULL, err, err_sz);

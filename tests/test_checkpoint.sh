@@ -106,6 +106,17 @@ run F "$SC" --replay "$TMP/a.csv" --checkpoint-at 0.5 "$TMP/f.ck" || fail "repla
 run G "$SC" --replay "$TMP/a.csv" --resume "$TMP/f.ck" || fail "replay resume" "$(cat "$TMP/G.err")"
 same "a replayed log resumed from 0.5 s" A G
 
+# A second needle through a tilted entry (act.next_needle), checkpointed while it goes in, with
+# a --set the resumed run takes from the checkpoint and writes into a checkpoint of its own.
+TN=$SRC/tests/data/checkpoint/two_needles.lua
+run N1 "$TN" --set tissue.refine=1 || fail "two needles" "$(cat "$TMP/N1.err")"
+run N2 "$TN" --set tissue.refine=1 --checkpoint-at 1.8 "$TMP/n.ck" || fail "two needles checkpoint" "$(cat "$TMP/N2.err")"
+run N3 "$TN" --resume "$TMP/n.ck" --checkpoint-at 2.0 "$TMP/n2.ck" || fail "two needles resume" "$(cat "$TMP/N3.err")"
+same "a tilted second needle resumed at 1.8 s" N1 N3
+run N4 "$TN" --resume "$TMP/n2.ck" || fail "two needles second resume" "$(cat "$TMP/N4.err")"
+same "... and from its own checkpoint at 2 s (the --set carried)" N1 N4
+if [ "$(key "$TMP/N4" sets)" = '["tissue.refine=1"]' ]; then pass "the resumed run's report has the checkpoint's --set"; else fail "sets" "$(key "$TMP/N4" sets)"; fi
+
 # Refusals.
 cp "$TMP/b.ck" "$TMP/input-damaged.ck"
 size=$(stat -c %s "$TMP/input-damaged.ck")
@@ -122,6 +133,10 @@ refused same-file 2 "same file" "$SC" --resume "$TMP/b.ck" --checkpoint-at 1.5 "
 cp "$SC" "$TMP/copy.lua"
 refused onto-input 2 "the run's own input" "$TMP/copy.lua" --checkpoint-at 1 "$TMP/copy.lua"
 refused bad-time 2 "expected a time" "$SC" --checkpoint-at -1 "$TMP/bad-time.ck"
+refused flag-as-file 2 "expected a file" "$SC" --checkpoint-at 1 --quiet
+refused folder 2 "not a regular file" "$SC" --checkpoint-at 1 "$TMP"
+refused no-folder 2 "folder does not exist" "$SC" --checkpoint-at 1 "$TMP/none/x.ck"
+refused not-after 1 "not after" "$SC" --resume "$TMP/b.ck" --checkpoint-at 0.5 "$TMP/not-after.ck"
 
 echo "$PASSED passed, $FAILED failed"
 [ "$FAILED" -eq 0 ]
