@@ -15,11 +15,9 @@ BIN=${1:?usage: test_live.sh NEEDLESIM_BINARY SOURCE_DIR}
 SRC=${2:?usage: test_live.sh NEEDLESIM_BINARY SOURCE_DIR}
 PY=/usr/bin/python3 # apt's, with python3-websockets (not a pyenv's)
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-live.XXXXXX") || exit 1
-PIDS=()
+. "$SRC/tests/live_lib.sh"
 cleanup() {
-    for p in "${PIDS[@]}"; do
-        kill -KILL "$p" 2>/dev/null
-    done
+    stop_sessions
     rm -rf "$TMP"
 }
 trap cleanup EXIT
@@ -27,37 +25,6 @@ PASSED=0
 FAILED=0
 pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
 fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
-
-# start NAME ARGS...: starts a session in the background; its URL in $URL (empty on failure).
-start() {
-    local name=$1
-    shift
-    "$BIN" live "$@" >"$TMP/$name.out" 2>"$TMP/$name.err" &
-    PID=$!
-    PIDS+=("$PID")
-    URL=""
-    for _ in $(seq 1 600); do # liveness: up to 120 s to build the scenario and listen
-        URL=$(sed -n '1s/^needlesim live: open //p' "$TMP/$name.out")
-        [ -n "$URL" ] && return 0
-        kill -0 "$PID" 2>/dev/null || return 1
-        sleep 0.2
-    done
-    return 1
-}
-
-# wait_exit PID SECONDS: the process's exit status, or 124 after SECONDS (then it is killed).
-wait_exit() {
-    local pid=$1 n=$(($2 * 5))
-    for _ in $(seq 1 "$n"); do
-        if ! kill -0 "$pid" 2>/dev/null; then
-            wait "$pid"
-            return $?
-        fi
-        sleep 0.2
-    done
-    kill -KILL "$pid" 2>/dev/null
-    return 124
-}
 
 # ---- usage errors ----
 "$BIN" live >/dev/null 2>&1
@@ -111,21 +78,10 @@ grep -q '^#source live$' "$OUT/controls.csv" && pass "session: the log says #sou
     fail "session: log" "no #source live"
 
 # ---- its replay: the same state hash and score ----
-if "$BIN" run "$SRC/scenarios/tutorial.lua" --replay "$OUT/controls.csv" -o "$TMP/replay" \
-    --no-render --quiet 2>"$TMP/replay.err"; then
-    if "$PY" - "$OUT/report.json" "$TMP/replay/report.json" <<'PY'; then
-import json, sys
-a, b = (json.load(open(p)) for p in sys.argv[1:3])
-assert a["state_hash"] == b["state_hash"], (a["state_hash"], b["state_hash"])
-assert a["score"]["total"] == b["score"]["total"], (a["score"], b["score"])
-assert a["steps"] == b["steps"], (a["steps"], b["steps"])
-PY
-        pass "replay: the same state hash, score and steps"
-    else
-        fail "replay" "state hash, score or steps differ"
-    fi
+if r=$(replay_same "$SRC/scenarios/tutorial.lua" "$OUT" "$OUT/controls.csv" replay); then
+    pass "replay: the same state hash, score and steps ($r)"
 else
-    fail "replay" "$(tail -2 "$TMP/replay.err")"
+    fail "replay" "$r"
 fi
 
 # ---- live = {script = true}: the scenario's set-up drives, then the trainee; its replay ----
@@ -142,16 +98,10 @@ if start scripted "$TMP/scripted.lua" --port 0 -o "$OUT3" --width 320 --height 1
     wait_exit "$PID" 120
     rc=$?
     [ $rc -eq 0 ] && pass "scripted: exit 0" || fail "scripted: exit" "$rc"
-    if "$BIN" run "$TMP/scripted.lua" --replay "$OUT3/controls.csv" -o "$TMP/replay3" \
-        --no-render --quiet 2>"$TMP/replay3.err" &&
-        "$PY" - "$OUT3/report.json" "$TMP/replay3/report.json" <<'PY'; then
-import json, sys
-a, b = (json.load(open(p)) for p in sys.argv[1:3])
-assert a["state_hash"] == b["state_hash"] and a["score"]["total"] == b["score"]["total"]
-PY
-        pass "scripted: the replay gives the same state hash and score"
+    if r=$(replay_same "$TMP/scripted.lua" "$OUT3" "$OUT3/controls.csv" replay3); then
+        pass "scripted: the replay gives the same state hash, score and steps"
     else
-        fail "scripted: replay" "$(tail -2 "$TMP/replay3.err")"
+        fail "scripted: replay" "$r"
     fi
 else
     fail "scripted: start" "$(tail -3 "$TMP/scripted.err")"

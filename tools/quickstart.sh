@@ -17,12 +17,16 @@ mode="${1:-run}"
 # the build links it explicitly (meson.build), so the choice does not rest on
 # update-alternatives. Rendering: EGL and libOpenGL (glvnd) with Mesa's llvmpipe for machines
 # without a GPU, FreeType and the DejaVu font for the frames' text, ffmpeg for the videos.
-# `needlesim live`: civetweb (HTTP + WebSocket), libjpeg-turbo (the frames); its test's client
-# uses python3-websockets with Debian's /usr/bin/python3.
+# `needlesim live`: civetweb (HTTP + WebSocket), libjpeg-turbo (the frames). Its tests only: the
+# scripted client uses python3-websockets with Debian's /usr/bin/python3, the browser test
+# Chromium (headless, driven over the DevTools protocol by Python's standard library).
 packages=(gcc pkg-config meson ninja-build liblua5.4-dev libsuitesparse-dev libmetis-dev
           libopenblas-dev libpng-dev libegl-dev libopengl-dev libgl-dev libegl-mesa0
           libgl1-mesa-dri libfreetype-dev fonts-dejavu-core ffmpeg python3
-          libcivetweb-dev libjpeg62-turbo-dev python3-websockets)
+          libcivetweb-dev libjpeg62-turbo-dev)
+if [ "$mode" = test ]; then
+    packages+=(python3-websockets chromium)
+fi
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
