@@ -1,6 +1,6 @@
 /* needlesim live SCENARIO.lua [--port N] [--bind ADDR] [--width W --height H] [--fps F]
  *                             [--record LOG.csv] [-o DIR] [--set KEY=VALUE]... [--threads N]
- *                             [--trainee ID] [--session ID] [--quiet]
+ *                             [--trainee ID] [--session ID] [--quiet] [--samples N]
  *
  * A trainee drives the needle from a browser (docs/live.md): the scenario is built, a server
  * listens (engine/live_server.c), and the session (engine/live_session.c) steps the run in
@@ -32,8 +32,10 @@ static const char live_usage[] =
     "usage: needlesim live SCENARIO.lua [--port N] [--bind ADDR] [--width W --height H]\n"
     "                      [--fps F] [--record LOG.csv] [-o DIR] [--set KEY=VALUE]...\n"
     "                      [--threads N] [--trainee ID] [--session ID] [--quiet]\n"
+    "                      [--samples N]\n"
     "  defaults: --bind 127.0.0.1 --port 8080 (0: a free port) --width 960 --height 540\n"
-    "  --fps 25 -o needlesim-out; the control log goes to DIR/controls.csv unless --record\n";
+    "  --fps 25 --samples 1 (multisampling) -o needlesim-out; the control log goes to\n"
+    "  DIR/controls.csv unless --record\n";
 
 typedef struct LiveArgs {
     NsRunOpts run;
@@ -88,6 +90,11 @@ static int parse_args(int argc, char **argv, LiveArgs *la)
             return 1;
         } else if (strcmp(a, "--quiet") == 0) {
             o->quiet = true;
+        } else if (strcmp(a, "--samples") == 0) {
+            if (number_arg(a, v, 1, 16, true, &x))
+                return 2;
+            la->live.samples = (int)x;
+            i++;
         } else if (strcmp(a, "--port") == 0 || strcmp(a, "--threads") == 0 ||
                    strcmp(a, "--fps") == 0 || strcmp(a, "--width") == 0 ||
                    strcmp(a, "--height") == 0) {

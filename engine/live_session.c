@@ -61,7 +61,7 @@ struct NsLiveSession {
     char notice[256];
     bool over;
     /* figures */
-    NsSeries fps, rtf, latency, render_ms, encode_ms, snap_ms;
+    NsSeries fps, rtf, latency, render_ms, encode_ms, snap_ms, scene_ms, gl_ms;
     double rtf_now, fps_now;
     int clients_now, clients_total;
     long frames;
@@ -77,7 +77,8 @@ struct NsLiveSession {
 
 NsLiveOpts ns_default_live_opts(void)
 {
-    return (NsLiveOpts){.width = 960, .height = 540, .fps = 25.0, .quality = 80, .max_lag_s = 0.2};
+    return (NsLiveOpts){
+        .width = 960, .height = 540, .fps = 25.0, .quality = 80, .samples = 1, .max_lag_s = 0.2};
 }
 
 static void abs_time(double wall_s, struct timespec *ts)
@@ -313,7 +314,8 @@ static void *render_main(void *arg)
     (void)setpriority(PRIO_PROCESS, (id_t)gettid(), 5);
     NsLiveRender lr;
     char err[512] = "";
-    if (ns_live_render_open(&lr, s->r, s->o.width, s->o.height, s->o.quality, err, sizeof err)) {
+    if (ns_live_render_open(&lr, s->r, s->o.width, s->o.height, s->o.samples, s->o.quality, err,
+                            sizeof err)) {
         pthread_mutex_lock(&s->mu);
         s->render_failed = true;
         snprintf(s->render_err, sizeof s->render_err, "%s", err);
@@ -346,6 +348,8 @@ static void *render_main(void *arg)
         latency_marks(s, snap->step, now);
         ns_series_push(&s->render_ms, rm);
         ns_series_push(&s->encode_ms, em);
+        ns_series_push(&s->scene_ms, lr.frame.build_ms);
+        ns_series_push(&s->gl_ms, lr.frame.gl_ms);
         s->frames++;
         /* the delivered rate over windows of a second, none across a pause */
         win_frames++;
@@ -601,6 +605,8 @@ void ns_live_session_figures(const NsLiveSession *s, NsLiveFigures *f)
     f->render_ms = ns_series_quantile(&s->render_ms, 0.5);
     f->encode_ms = ns_series_quantile(&s->encode_ms, 0.5);
     f->snapshot_ms = ns_series_quantile(&s->snap_ms, 0.5);
+    f->scene_ms = ns_series_quantile(&s->scene_ms, 0.5);
+    f->gl_ms = ns_series_quantile(&s->gl_ms, 0.5);
     f->step_ms = ns_series_quantile(&s->r->step_ms, 0.5);
     f->frames = s->frames;
     f->latency_samples = s->latency.n;
@@ -663,9 +669,9 @@ void ns_live_session_free(NsLiveSession *s)
         ns_live_snap_free(&s->snaps[k]);
     free(s->jpeg.p);
     free(s->json.p);
-    NsSeries *series[6] = {&s->fps,       &s->rtf,       &s->latency,
-                           &s->render_ms, &s->encode_ms, &s->snap_ms};
-    for (int k = 0; k < 6; k++)
+    NsSeries *series[8] = {&s->fps,       &s->rtf,     &s->latency,  &s->render_ms,
+                           &s->encode_ms, &s->snap_ms, &s->scene_ms, &s->gl_ms};
+    for (int k = 0; k < 8; k++)
         free(series[k]->v);
     pthread_cond_destroy(&s->ctl_cv);
     pthread_cond_destroy(&s->snap_cv);
