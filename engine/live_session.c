@@ -624,6 +624,41 @@ static void pair(NsJson *j, const char *key, const char *k1, double v1, const ch
     ns_json_end_object(j);
 }
 
+/* The time step and solver settings the session ran with, and where they came from. */
+static void model_json(NsJson *j, const NsRun *r)
+{
+    const NsRunSpec *sp = &r->spec;
+    static const char *const keys[7] = {"dt_s",
+                                        "tolerance",
+                                        "check_tolerance",
+                                        "lazy_threshold",
+                                        "accuracy_tip_m",
+                                        "measured_tip_error_m",
+                                        "measured_cost_ms_per_s"};
+    const double v[7] = {sp->dt,
+                         r->c.params.tau_sol,
+                         r->c.params.tau_check,
+                         r->tissue.params.lazy_threshold,
+                         sp->accuracy,
+                         sp->accuracy_tip_error,
+                         sp->accuracy_cost};
+    ns_json_key(j, "model");
+    ns_json_begin_object(j);
+    ns_json_key(j, "chosen_by");
+    ns_json_string(j, sp->model_chosen ? "accuracy" : "scenario");
+    for (int k = 0; k < (sp->model_chosen ? 7 : 4); k++) {
+        ns_json_key(j, keys[k]);
+        ns_json_number(j, v[k]);
+    }
+    if (sp->model_chosen) { /* the front's setting (live --accuracy) */
+        ns_json_key(j, "front");
+        ns_json_string(j, sp->accuracy_front);
+        ns_json_key(j, "chosen");
+        ns_json_string(j, sp->accuracy_label);
+    }
+    ns_json_end_object(j);
+}
+
 void ns_live_session_report(NsJson *j, void *ctx)
 {
     const NsLiveSession *s = ctx;
@@ -651,6 +686,7 @@ void ns_live_session_report(NsJson *j, void *ctx)
     ns_json_number(j, s->o.fps);
     ns_json_key(j, "ended_by");
     ns_json_string(j, ns_live_session_end_reason(s));
+    model_json(j, s->r);
     ns_json_end_object(j);
 }
 
