@@ -165,7 +165,9 @@ static void print_json(const Bench *b, const NsLiveRunResult *res, const NsSerie
                           "snapshot_ms",
                           "session_fps_median",
                           "scene_ms",
-                          "gl_ms"};
+                          "gl_ms",
+                          "step_cpu_ms",
+                          "frame_cpu_ms"};
     double vals[] = {ns_series_quantile(fps, 0.5),
                      ns_series_quantile(fps, 0.05),
                      f->rtf_median,
@@ -178,7 +180,9 @@ static void print_json(const Bench *b, const NsLiveRunResult *res, const NsSerie
                      f->snapshot_ms,
                      f->fps_median,
                      f->scene_ms,
-                     f->gl_ms};
+                     f->gl_ms,
+                     f->step_cpu_ms,
+                     f->frame_cpu_ms};
     for (size_t k = 0; k < sizeof vals / sizeof vals[0]; k++) {
         ns_json_key(&j, keys[k]);
         ns_json_number(&j, vals[k]);
@@ -274,6 +278,9 @@ int ns_bench_live(int argc, char **argv)
                "%.1f, OpenGL %.1f), encode %.1f ms, state copy %.3f ms a frame\n",
                f->step_ms, res.steps ? res.sim_s / (double)res.steps : 0.0, f->render_ms,
                f->scene_ms, f->gl_ms, f->encode_ms, f->snapshot_ms);
+        printf("CPU time: a step %.2f ms on the solver's thread, a frame %.1f ms on the render "
+               "thread (without llvmpipe's rasterizer threads, if any)\n",
+               f->step_cpu_ms, f->frame_cpu_ms);
         printf("score %.1f; state hash %016llx\n", res.score, (unsigned long long)res.hash);
     }
     free(fps.v);

@@ -61,7 +61,7 @@ struct NsLiveSession {
     char notice[256];
     bool over;
     /* figures */
-    NsSeries fps, rtf, latency, render_ms, encode_ms, snap_ms, scene_ms, gl_ms;
+    NsSeries fps, rtf, latency, render_ms, encode_ms, snap_ms, scene_ms, gl_ms, step_cpu, frame_cpu;
     double rtf_now, fps_now;
     int clients_now, clients_total;
     long frames;
@@ -333,7 +333,7 @@ static void *render_main(void *arg)
             break;
         if (got == 0)
             continue;
-        double rm, em;
+        double rm, em, cpu0 = ns_thread_cpu_s();
         const NsLiveSnap *snap = &s->snaps[s->front];
         if (ns_live_render_draw(&lr, snap, s->fps_now, &rm, &em, err, sizeof err)) {
             pthread_mutex_lock(&s->mu);
@@ -348,6 +348,7 @@ static void *render_main(void *arg)
         latency_marks(s, snap->step, now);
         ns_series_push(&s->render_ms, rm);
         ns_series_push(&s->encode_ms, em);
+        ns_series_push(&s->frame_cpu, 1e3 * (ns_thread_cpu_s() - cpu0));
         ns_series_push(&s->scene_ms, lr.frame.build_ms);
         ns_series_push(&s->gl_ms, lr.frame.gl_ms);
         s->frames++;
@@ -529,7 +530,9 @@ static int solver_loop(NsLiveSession *s, char *err, int err_sz)
             session_event(s, t, "seed");
         if (c.next_needle)
             session_event(s, t, "next_needle");
+        double cpu0 = ns_thread_cpu_s();
         int rc = ns_run_tick(r, &c, err, err_sz);
+        ns_series_push(&s->step_cpu, 1e3 * (ns_thread_cpu_s() - cpu0));
         if (rc < 0 && ns_cleanup_signal()) { /* stopped inside the tick: nothing was stepped */
             s->end_reason = "signal";
             return 0;
@@ -607,6 +610,8 @@ void ns_live_session_figures(const NsLiveSession *s, NsLiveFigures *f)
     f->snapshot_ms = ns_series_quantile(&s->snap_ms, 0.5);
     f->scene_ms = ns_series_quantile(&s->scene_ms, 0.5);
     f->gl_ms = ns_series_quantile(&s->gl_ms, 0.5);
+    f->step_cpu_ms = ns_series_quantile(&s->step_cpu, 0.5);
+    f->frame_cpu_ms = ns_series_quantile(&s->frame_cpu, 0.5);
     f->step_ms = ns_series_quantile(&s->r->step_ms, 0.5);
     f->frames = s->frames;
     f->latency_samples = s->latency.n;
@@ -705,9 +710,9 @@ void ns_live_session_free(NsLiveSession *s)
         ns_live_snap_free(&s->snaps[k]);
     free(s->jpeg.p);
     free(s->json.p);
-    NsSeries *series[8] = {&s->fps,       &s->rtf,     &s->latency,  &s->render_ms,
-                           &s->encode_ms, &s->snap_ms, &s->scene_ms, &s->gl_ms};
-    for (int k = 0; k < 8; k++)
+    NsSeries *series[10] = {&s->fps,     &s->rtf,      &s->latency, &s->render_ms, &s->encode_ms,
+                            &s->snap_ms, &s->scene_ms, &s->gl_ms,   &s->step_cpu,  &s->frame_cpu};
+    for (int k = 0; k < 10; k++)
         free(series[k]->v);
     pthread_cond_destroy(&s->ctl_cv);
     pthread_cond_destroy(&s->snap_cv);

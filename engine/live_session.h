@@ -63,6 +63,8 @@ typedef struct NsLiveFigures {
     double fps_median, fps_p5, rtf_median, rtf_min, latency_median, latency_p95;
     double render_ms, encode_ms, snapshot_ms, step_ms;
     double scene_ms, gl_ms; /* render_ms's parts: the views' vertex lists; OpenGL with read-back */
+    double step_cpu_ms,
+        frame_cpu_ms; /* the solver's and render thread's CPU time a step, a frame */
     long frames, latency_samples;
     int clients;
 } NsLiveFigures;
