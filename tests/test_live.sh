@@ -197,16 +197,17 @@ fi
 
 # ---- --accuracy: dt and solver settings from the measured front; the log's #model; its replay ----
 OUT4="$TMP/accuracy"
-if (timeout 300 "$BIN" bench --live "$SRC/scenarios/tutorial.lua" --seconds 3 --accuracy 11e-3 \
-    --json --width 320 --height 180 -o "$OUT4" >"$TMP/acc.json" 2>"$TMP/acc.err") &&
-    grep -q '^#model dt=0.02 tolerance=0.0001 check_tolerance=0.01 lazy_threshold=0.05' \
+if (timeout 300 "$BIN" bench --live "$SRC/scenarios/tutorial.lua" --seconds 3 --accuracy 0.5e-3 \
+    --front brachytherapy --json --width 320 --height 180 -o "$OUT4" >"$TMP/acc.json" \
+    2>"$TMP/acc.err") &&
+    grep -q '^#model dt=0.02 tolerance=9.99.*e-07 check_tolerance=9.99.*e-05 lazy_threshold=0.05' \
         "$OUT4/controls.csv" &&
     "$PY" - "$OUT4/report.json" <<'PY'; then
 import json, sys
 m = json.load(open(sys.argv[1]))["live"]["model"]
-assert m["chosen_by"] == "accuracy" and m["dt_s"] == 0.02 and m["front"] == "phantom", m
-assert m["tolerance"] == 1e-4 and m["lazy_threshold"] == 0.05, m
-assert 0 < m["measured_tip_error_m"] <= 11e-3, m
+assert m["chosen_by"] == "accuracy" and m["dt_s"] == 0.02 and m["front"] == "brachytherapy", m
+assert m["tolerance"] == 1e-6 and m["lazy_threshold"] == 0.05, m
+assert 0 < m["measured_tip_error_m"] <= 0.5e-3, m
 PY
     pass "accuracy: the front's dt and settings, in the log (#model) and the report"
     if "$BIN" run "$SRC/scenarios/tutorial.lua" --replay "$OUT4/controls.csv" -o "$TMP/replay4" \
