@@ -1,5 +1,6 @@
 /* needlesim bench --live SCENARIO.lua [--seconds S] [--json] [--threads N] [--set KEY=VALUE]...
  *                                     [--width W --height H] [--fps F] [-o DIR]
+ *                                     [--samples N] [--accuracy TIP [--front NAME]]
  *
  * The issue's bars, measured (docs/live.md, "Measuring"): a live session on a free loopback
  * port, driven over a real WebSocket by a synthetic client (civetweb's client API) that
@@ -28,7 +29,8 @@
 
 static const char usage[] =
     "usage: needlesim bench --live SCENARIO.lua [--seconds S] [--json] [--threads N]\n"
-    "                       [--set KEY=VALUE]... [--width W --height H] [--fps F] [-o DIR]\n";
+    "                       [--set KEY=VALUE]... [--width W --height H] [--fps F] [-o DIR]\n"
+    "                       [--samples N] [--accuracy TIP [--front NAME]]\n";
 
 typedef struct Bench {
     double seconds;
