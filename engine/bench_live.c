@@ -1,5 +1,6 @@
 /* needlesim bench --live SCENARIO.lua [--seconds S] [--json] [--threads N] [--set KEY=VALUE]...
  *                                     [--width W --height H] [--fps F] [-o DIR]
+ *                                     [--samples N] [--accuracy TIP [--front NAME]]
  *
  * The issue's bars, measured (docs/live.md, "Measuring"): a live session on a free loopback
  * port, driven over a real WebSocket by a synthetic client (civetweb's client API) that
@@ -28,7 +29,8 @@
 
 static const char usage[] =
     "usage: needlesim bench --live SCENARIO.lua [--seconds S] [--json] [--threads N]\n"
-    "                       [--set KEY=VALUE]... [--width W --height H] [--fps F] [-o DIR]\n";
+    "                       [--set KEY=VALUE]... [--width W --height H] [--fps F] [-o DIR]\n"
+    "                       [--samples N] [--accuracy TIP [--front NAME]]\n";
 
 typedef struct Bench {
     double seconds;
@@ -163,7 +165,11 @@ static void print_json(const Bench *b, const NsLiveRunResult *res, const NsSerie
                           "encode_ms",
                           "step_ms",
                           "snapshot_ms",
-                          "session_fps_median"};
+                          "session_fps_median",
+                          "scene_ms",
+                          "gl_ms",
+                          "step_cpu_ms",
+                          "frame_cpu_ms"};
     double vals[] = {ns_series_quantile(fps, 0.5),
                      ns_series_quantile(fps, 0.05),
                      f->rtf_median,
@@ -174,7 +180,11 @@ static void print_json(const Bench *b, const NsLiveRunResult *res, const NsSerie
                      f->encode_ms,
                      f->step_ms,
                      f->snapshot_ms,
-                     f->fps_median};
+                     f->fps_median,
+                     f->scene_ms,
+                     f->gl_ms,
+                     f->step_cpu_ms,
+                     f->frame_cpu_ms};
     for (size_t k = 0; k < sizeof vals / sizeof vals[0]; k++) {
         ns_json_key(&j, keys[k]);
         ns_json_number(&j, vals[k]);
@@ -266,10 +276,13 @@ int ns_bench_live(int argc, char **argv)
         printf("real-time factor   %6.3f median, %6.3f min\n", f->rtf_median, f->rtf_min);
         printf("input latency      %6.1f ms median, %6.1f ms p95 (%ld messages)\n",
                f->latency_median, f->latency_p95, f->latency_samples);
-        printf("where the time goes: step %.2f ms (median; dt %.4g s), render %.1f ms, encode "
-               "%.1f ms, state copy %.3f ms a frame\n",
+        printf("where the time goes: step %.2f ms (median; dt %.4g s), render %.1f ms (scene "
+               "%.1f, OpenGL %.1f), encode %.1f ms, state copy %.3f ms a frame\n",
                f->step_ms, res.steps ? res.sim_s / (double)res.steps : 0.0, f->render_ms,
-               f->encode_ms, f->snapshot_ms);
+               f->scene_ms, f->gl_ms, f->encode_ms, f->snapshot_ms);
+        printf("CPU time: a step %.2f ms on the solver's thread, a frame %.1f ms on the render "
+               "thread (without llvmpipe's rasterizer threads, if any)\n",
+               f->step_cpu_ms, f->frame_cpu_ms);
         printf("score %.1f; state hash %016llx\n", res.score, (unsigned long long)res.hash);
     }
     free(fps.v);

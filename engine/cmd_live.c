@@ -1,6 +1,7 @@
 /* needlesim live SCENARIO.lua [--port N] [--bind ADDR] [--width W --height H] [--fps F]
  *                             [--record LOG.csv] [-o DIR] [--set KEY=VALUE]... [--threads N]
- *                             [--trainee ID] [--session ID] [--quiet]
+ *                             [--trainee ID] [--session ID] [--quiet] [--samples N]
+ *                             [--accuracy TIP [--front NAME]]
  *
  * A trainee drives the needle from a browser (docs/live.md): the scenario is built, a server
  * listens (engine/live_server.c), and the session (engine/live_session.c) steps the run in
@@ -24,6 +25,7 @@
 #include "err.h"
 #include "live_server.h"
 #include "live_session.h"
+#include "lua_runtime.h"
 #include "names.h"
 #include "ns_limits.h"
 #include "run.h"
@@ -32,12 +34,16 @@ static const char live_usage[] =
     "usage: needlesim live SCENARIO.lua [--port N] [--bind ADDR] [--width W --height H]\n"
     "                      [--fps F] [--record LOG.csv] [-o DIR] [--set KEY=VALUE]...\n"
     "                      [--threads N] [--trainee ID] [--session ID] [--quiet]\n"
+    "                      [--samples N] [--accuracy TIP [--front NAME]]\n"
     "  defaults: --bind 127.0.0.1 --port 8080 (0: a free port) --width 960 --height 540\n"
-    "  --fps 25 -o needlesim-out; the control log goes to DIR/controls.csv unless --record\n";
+    "  --fps 25 --samples 1 (multisampling) -o needlesim-out; the control log goes to\n"
+    "  DIR/controls.csv unless --record\n";
 
 typedef struct LiveArgs {
     NsRunOpts run;
     NsLiveOpts live;
+    double accuracy;   /* --accuracy [m] (0: the scenario's dt and solver settings) */
+    const char *front; /* --front: the measured front it is taken from */
     const char *bind;
     int port;
     NsLiveHook hook; /* bench --live: its client starts once the server listens */
@@ -88,6 +94,20 @@ static int parse_args(int argc, char **argv, LiveArgs *la)
             return 1;
         } else if (strcmp(a, "--quiet") == 0) {
             o->quiet = true;
+        } else if (strcmp(a, "--accuracy") == 0) {
+            if (number_arg(a, v, 1e-9, 1.0, false, &la->accuracy))
+                return 2;
+            i++;
+        } else if (strcmp(a, "--front") == 0) {
+            if (!v || !v[0])
+                return usage_error("%s needs a value", a);
+            la->front = v;
+            i++;
+        } else if (strcmp(a, "--samples") == 0) {
+            if (number_arg(a, v, 1, 16, true, &x))
+                return 2;
+            la->live.samples = (int)x;
+            i++;
         } else if (strcmp(a, "--port") == 0 || strcmp(a, "--threads") == 0 ||
                    strcmp(a, "--fps") == 0 || strcmp(a, "--width") == 0 ||
                    strcmp(a, "--height") == 0) {
@@ -145,9 +165,66 @@ static int parse_args(int argc, char **argv, LiveArgs *la)
     }
     if (!o->scenario)
         return usage_error("%s", "missing SCENARIO.lua");
+    if (la->front && la->accuracy <= 0.0)
+        return usage_error("%s", "--front without --accuracy TIP");
     o->width = la->live.width;
     o->height = la->live.height;
     return 0;
+}
+
+/* --accuracy: the cheapest setting on the named front (scripts/needlesim/fronts.lua) measured
+ * on the scenario's own mesh whose tip error is within tip, as the scenario's accuracy field
+ * chooses (docs/performance.md); it replaces the scenario's dt and solver settings. */
+static int choose_model(NsRun *r, double tip, const char *front, char *err, int err_sz)
+{
+    lua_State *L = ns_lua_state(r->sc.lua);
+    int top = lua_gettop(L);
+    lua_getfield(L, LUA_REGISTRYINDEX, "ns.require");
+    lua_pushstring(L, "needlesim.fronts");
+    if (lua_pcall(L, 1, 1, 0) != LUA_OK || !lua_istable(L, -1) ||
+        lua_getfield(L, -1, front) != LUA_TTABLE) {
+        ns_set_err(err, err_sz, "needlesim live: --front '%s': no such measured front", front);
+        lua_settop(L, top);
+        return -1;
+    }
+    NsRunSpec *sp = &r->spec;
+    double best = INFINITY;
+    bool found = false;
+    for (lua_Integer i = 1; !found && lua_rawgeti(L, -1, i) == LUA_TTABLE; i++) { /* by cost */
+        double v[6];
+        static const char *const keys[6] = {"dt",        "refine", "tolerance",
+                                            "tip_error", "cost",   "lazy_threshold"};
+        for (int k = 0; k < 6; k++) {
+            lua_getfield(L, -1, keys[k]);
+            v[k] = lua_isnumber(L, -1) ? lua_tonumber(L, -1) : NAN;
+            lua_pop(L, 1);
+        }
+        best = fmin(best, v[3]);
+        if (v[1] == 1.0 && v[3] <= tip && v[0] > 0.0 && v[2] > 0.0 && v[2] < 1.0 && v[5] >= 0.0 &&
+            v[5] < 1.0) {
+            lua_getfield(L, -1, "label");
+            snprintf(sp->accuracy_label, sizeof sp->accuracy_label, "%s",
+                     lua_isstring(L, -1) ? lua_tostring(L, -1) : "");
+            lua_pop(L, 1);
+            sp->dt = v[0];
+            sp->tolerance = v[2];
+            sp->check_tolerance = fmin(0.5, 100.0 * v[2]); /* as ns.scenario's accuracy */
+            sp->lazy_threshold = v[5];
+            sp->accuracy = tip;
+            sp->accuracy_tip_error = v[3];
+            sp->accuracy_cost = v[4];
+            snprintf(sp->accuracy_front, sizeof sp->accuracy_front, "%s", front);
+            sp->model_chosen = found = true;
+        }
+        lua_pop(L, 1);
+    }
+    lua_settop(L, top);
+    if (!found)
+        ns_set_err(err, err_sz,
+                   "needlesim live: --accuracy %g m: no setting measured on the '%s' front "
+                   "reaches it on the scenario's own mesh (the best is %g m; docs/performance.md)",
+                   tip, front, best);
+    return found ? 0 : -1;
 }
 
 /* The session's end on stdout. */
@@ -179,6 +256,8 @@ static int live_session(NsRun *r, LiveArgs *la, char *record_path, char *err, in
     if (rc == 0 && ns_run_check_record_path(&r->opt))
         return -2;
     rc = rc ? rc : ns_run_load(r, err, err_sz);
+    if (rc == 0 && la->accuracy > 0.0)
+        rc = choose_model(r, la->accuracy, la->front ? la->front : "phantom", err, err_sz);
     rc = rc ? rc : ns_run_open_logs(r, err, err_sz);
     if (rc == 0)
         ns_run_traj_header(r);

@@ -224,6 +224,17 @@ int ns_run_open_logs(NsRun *r, char *err, int err_sz)
                           err, err_sz);
     if (rc == 0 && r->opt.replay)
         rc = ns_control_log_read(r->opt.replay, r->spec.dt, &r->replay, err, err_sz);
+    if (rc == 0 && r->opt.replay && r->replay.has_model) { /* a live session's own dt (#model) */
+        const NsLogModel *m = &r->replay.model;
+        NsRunCamera *cam = &r->spec.camera; /* the default frame rate in simulated time kept */
+        if (cam->frame_every == (int)fmax(1.0, floor(1.0 / (cam->fps * r->spec.dt) + 0.5)))
+            cam->frame_every = (int)fmax(1.0, floor(1.0 / (cam->fps * m->dt) + 0.5));
+        r->spec.dt = m->dt;
+        r->spec.tolerance = m->tolerance;
+        r->spec.check_tolerance = m->check_tolerance;
+        r->spec.lazy_threshold = m->lazy_threshold;
+        r->spec.model_chosen = true;
+    }
     if (rc == 0 && r->opt.replay)
         rc = ns_control_log_check_scenario(&r->replay, r->opt.replay, r->sc.name, sc_hash,
                                            r->opt.rescore, r->note, (int)sizeof r->note, err,
@@ -261,8 +272,15 @@ int ns_run_open_logs(NsRun *r, char *err, int err_sz)
                 ns_set_err(err, err_sz, "out of memory");
             rc = -1;
         } else {
-            NsLogProvenance prov = {NS_VERSION,     r->sc.name,     sc_hash,
-                                    r->opt.trainee, r->opt.session, r->opt.live};
+            NsLogModel m = {r->spec.dt, r->spec.tolerance, r->spec.check_tolerance,
+                            r->spec.lazy_threshold};
+            NsLogProvenance prov = {NS_VERSION,
+                                    r->sc.name,
+                                    sc_hash,
+                                    r->opt.trainee,
+                                    r->opt.session,
+                                    r->opt.live,
+                                    r->spec.model_chosen ? &m : NULL};
             ns_control_log_write_header(r->rec, &prov, r->opt.sets, r->opt.nsets);
         }
     }

@@ -47,6 +47,11 @@ void ns_control_log_write_header(FILE *f, const NsLogProvenance *prov, const cha
             fprintf(f, "#session %s\n", prov->session);
         if (prov->live)
             fputs("#source live\n", f);
+        if (prov->model)
+            fprintf(f,
+                    "#model dt=%.17g tolerance=%.17g check_tolerance=%.17g lazy_threshold=%.17g\n",
+                    prov->model->dt, prov->model->tolerance, prov->model->check_tolerance,
+                    prov->model->lazy_threshold);
     }
     for (int i = 0; i < nsets; i++)
         fprintf(f, "#set %s\n", sets[i]);
@@ -197,6 +202,29 @@ static const char *const columns[7] = {"t_s",         "v_insert_m_s", "base_vx_m
                                        "base_vy_m_s", "base_vz_m_s",  "twist_rate_rad_s",
                                        "event"};
 
+/* "#model dt=D tolerance=T check_tolerance=C lazy_threshold=L": 0, or -1 with a message. */
+static int read_model(const char *v, const char *path, long lineno, NsControlLog *log, char *err,
+                      int err_sz)
+{
+    NsLogModel *m = &log->model;
+    int used = 0;
+    bool ok = !log->has_model &&
+              sscanf(v, "dt=%lf tolerance=%lf check_tolerance=%lf lazy_threshold=%lf%n", &m->dt,
+                     &m->tolerance, &m->check_tolerance, &m->lazy_threshold, &used) == 4 &&
+              v[used] == '\0' && isfinite(m->dt) && m->dt > 0.0 && m->dt <= 1.0 &&
+              m->tolerance > 0.0 && m->tolerance < 1.0 && m->check_tolerance >= m->tolerance &&
+              m->check_tolerance < 1.0 && m->lazy_threshold >= 0.0 && m->lazy_threshold < 1.0;
+    if (!ok) {
+        ns_set_err(err, err_sz,
+                   "%s:%ld: #model must be 'dt=D tolerance=T check_tolerance=C lazy_threshold=L' "
+                   "(0 < D <= 1, 0 < T <= C < 1, 0 <= L < 1), once",
+                   path, lineno);
+        return -1;
+    }
+    log->has_model = true;
+    return 0;
+}
+
 /* One '#' line before the header: provenance, a --set, or a comment. 0, or -1 with a
  * message. */
 static int read_comment(const char *p, const char *path, long lineno, NsControlLog *log, char *err,
@@ -232,6 +260,8 @@ static int read_comment(const char *p, const char *path, long lineno, NsControlL
         snprintf(log->scenario, sizeof log->scenario, "%s", p + 10);
     } else if (strcmp(p, "#source live") == 0) {
         log->live = true;
+    } else if (strncmp(p, "#model ", 7) == 0) {
+        return read_model(p + 7, path, lineno, log, err, err_sz);
     } else if (strncmp(p, "#needlesim ", 11) == 0) {
         snprintf(log->version, sizeof log->version, "%s", p + 11);
     } else if (strncmp(p, "#trainee ", 9) == 0 || strncmp(p, "#session ", 9) == 0) {
@@ -430,7 +460,8 @@ int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *er
             break;
         }
         NsControl row;
-        if (parse_row(line, path, lineno, lineno - header_line - 1, dt, &row, err, err_sz)) {
+        if (parse_row(line, path, lineno, lineno - header_line - 1,
+                      log->has_model ? log->model.dt : dt, &row, err, err_sz)) {
             rc = -1;
             break;
         }

@@ -18,6 +18,10 @@
  *     #set KEY=VALUE                    each --set of the run, which its replay must repeat
  *     #source live                      recorded by `needlesim live`: the session may end before
  *                                       the scenario's duration, and a replay ends with the log
+ *     #model dt=D tolerance=T check_tolerance=C lazy_threshold=L
+ *                                       the time step and solver settings the session chose
+ *                                       instead of the scenario's (live --accuracy); a replay
+ *                                       steps with them (%.17g, so bit for bit)
  *
  * Other '#' lines are comments, skipped (later versions add keys). A replay refuses a log whose
  * scenario hash is not its scenario file's, unless told to re-score it; a log without a hash
@@ -52,6 +56,11 @@ typedef struct NsControl {
 
 #define NS_CONTROL_LOG_MAX_SETS 32
 
+/* A run's time step and solver settings, when chosen apart from the scenario's (#model). */
+typedef struct NsLogModel {
+    double dt, tolerance, check_tolerance, lazy_threshold;
+} NsLogModel;
+
 /* Trainee and session IDs: 1 to NS_CONTROL_LOG_ID_MAX characters of [A-Za-z0-9._-]. */
 #define NS_CONTROL_LOG_ID_MAX 64
 
@@ -68,6 +77,8 @@ typedef struct NsControlLog {
     long hash_line; /* the #scenario_hash line, for messages */
     char trainee[NS_CONTROL_LOG_ID_MAX + 1], session[NS_CONTROL_LOG_ID_MAX + 1];
     bool live; /* #source live */
+    bool has_model;
+    NsLogModel model; /* #model: the rows step by model.dt */
 } NsControlLog;
 
 /* What a recorded log says it was recorded with. trainee and session may be NULL. */
@@ -75,13 +86,15 @@ typedef struct NsLogProvenance {
     const char *version, *scenario;
     uint64_t scenario_hash;
     const char *trainee, *session;
-    bool live; /* a live session's log: #source live */
+    bool live;               /* a live session's log: #source live */
+    const NsLogModel *model; /* #model, or NULL */
 } NsLogProvenance;
 
-/* Reads a log for a scenario stepping by dt: '#' lines, the header above, then one row per step
- * whose t is k dt (within dt / 1000), finite decimal numbers within the limits, the event
- * empty, "drop_seed" or "next_needle:px;py;pz;dx;dy;dz[;bx;by;bz]" (the new entry: point,
- * direction, bevel_toward). Returns 0, or -1 with "path:line: ..." in err. */
+/* Reads a log for a scenario stepping by dt (by its #model's dt when it has one): '#' lines, the
+ * header above, then one row per step whose t is k dt (within dt / 1000), finite decimal numbers
+ * within the limits, the event empty, "drop_seed" or "next_needle:px;py;pz;dx;dy;dz[;bx;by;bz]"
+ * (the new entry: point, direction, bevel_toward). Returns 0, or -1 with "path:line: ..." in err.
+ */
 int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz);
 void ns_control_log_free(NsControlLog *log);
 

@@ -165,13 +165,13 @@ void ns_live_snap_free(NsLiveSnap *s)
 
 /* ---- the render thread ---- */
 
-int ns_live_render_open(NsLiveRender *lr, const NsRun *r, int w, int h, int quality, char *err,
-                        int err_sz)
+int ns_live_render_open(NsLiveRender *lr, const NsRun *r, int w, int h, int samples, int quality,
+                        char *err, int err_sz)
 {
     memset(lr, 0, sizeof *lr);
     lr->run = r;
     lr->quality = quality;
-    if (ns_frame_open(&lr->frame, w, h, err, err_sz))
+    if (ns_frame_open_samples(&lr->frame, w, h, samples, err, err_sz))
         return -1;
     lr->open = true;
     return 0;

@@ -68,8 +68,8 @@ typedef struct NsLiveRender {
 } NsLiveRender;
 
 /* Opens the renderer on the calling thread (its EGL context is current there). */
-int ns_live_render_open(NsLiveRender *lr, const NsRun *r, int w, int h, int quality, char *err,
-                        int err_sz);
+int ns_live_render_open(NsLiveRender *lr, const NsRun *r, int w, int h, int samples, int quality,
+                        char *err, int err_sz);
 /* Draws s and encodes it (lr->jpeg), and writes its state message (lr->json): fps is the
  * delivered frame rate to report. render_ms and encode_ms: what each took. */
 int ns_live_render_draw(NsLiveRender *lr, const NsLiveSnap *s, double fps, double *render_ms,

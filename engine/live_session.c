@@ -61,7 +61,7 @@ struct NsLiveSession {
     char notice[256];
     bool over;
     /* figures */
-    NsSeries fps, rtf, latency, render_ms, encode_ms, snap_ms;
+    NsSeries fps, rtf, latency, render_ms, encode_ms, snap_ms, scene_ms, gl_ms, step_cpu, frame_cpu;
     double rtf_now, fps_now;
     int clients_now, clients_total;
     long frames;
@@ -77,7 +77,8 @@ struct NsLiveSession {
 
 NsLiveOpts ns_default_live_opts(void)
 {
-    return (NsLiveOpts){.width = 960, .height = 540, .fps = 25.0, .quality = 80, .max_lag_s = 0.2};
+    return (NsLiveOpts){
+        .width = 960, .height = 540, .fps = 25.0, .quality = 80, .samples = 1, .max_lag_s = 0.2};
 }
 
 static void abs_time(double wall_s, struct timespec *ts)
@@ -313,7 +314,8 @@ static void *render_main(void *arg)
     (void)setpriority(PRIO_PROCESS, (id_t)gettid(), 5);
     NsLiveRender lr;
     char err[512] = "";
-    if (ns_live_render_open(&lr, s->r, s->o.width, s->o.height, s->o.quality, err, sizeof err)) {
+    if (ns_live_render_open(&lr, s->r, s->o.width, s->o.height, s->o.samples, s->o.quality, err,
+                            sizeof err)) {
         pthread_mutex_lock(&s->mu);
         s->render_failed = true;
         snprintf(s->render_err, sizeof s->render_err, "%s", err);
@@ -331,7 +333,7 @@ static void *render_main(void *arg)
             break;
         if (got == 0)
             continue;
-        double rm, em;
+        double rm, em, cpu0 = ns_thread_cpu_s();
         const NsLiveSnap *snap = &s->snaps[s->front];
         if (ns_live_render_draw(&lr, snap, s->fps_now, &rm, &em, err, sizeof err)) {
             pthread_mutex_lock(&s->mu);
@@ -346,6 +348,9 @@ static void *render_main(void *arg)
         latency_marks(s, snap->step, now);
         ns_series_push(&s->render_ms, rm);
         ns_series_push(&s->encode_ms, em);
+        ns_series_push(&s->frame_cpu, 1e3 * (ns_thread_cpu_s() - cpu0));
+        ns_series_push(&s->scene_ms, lr.frame.build_ms);
+        ns_series_push(&s->gl_ms, lr.frame.gl_ms);
         s->frames++;
         /* the delivered rate over windows of a second, none across a pause */
         win_frames++;
@@ -525,7 +530,9 @@ static int solver_loop(NsLiveSession *s, char *err, int err_sz)
             session_event(s, t, "seed");
         if (c.next_needle)
             session_event(s, t, "next_needle");
+        double cpu0 = ns_thread_cpu_s();
         int rc = ns_run_tick(r, &c, err, err_sz);
+        ns_series_push(&s->step_cpu, 1e3 * (ns_thread_cpu_s() - cpu0));
         if (rc < 0 && ns_cleanup_signal()) { /* stopped inside the tick: nothing was stepped */
             s->end_reason = "signal";
             return 0;
@@ -601,6 +608,10 @@ void ns_live_session_figures(const NsLiveSession *s, NsLiveFigures *f)
     f->render_ms = ns_series_quantile(&s->render_ms, 0.5);
     f->encode_ms = ns_series_quantile(&s->encode_ms, 0.5);
     f->snapshot_ms = ns_series_quantile(&s->snap_ms, 0.5);
+    f->scene_ms = ns_series_quantile(&s->scene_ms, 0.5);
+    f->gl_ms = ns_series_quantile(&s->gl_ms, 0.5);
+    f->step_cpu_ms = ns_series_quantile(&s->step_cpu, 0.5);
+    f->frame_cpu_ms = ns_series_quantile(&s->frame_cpu, 0.5);
     f->step_ms = ns_series_quantile(&s->r->step_ms, 0.5);
     f->frames = s->frames;
     f->latency_samples = s->latency.n;
@@ -615,6 +626,41 @@ static void pair(NsJson *j, const char *key, const char *k1, double v1, const ch
     ns_json_number(j, v1);
     ns_json_key(j, k2);
     ns_json_number(j, v2);
+    ns_json_end_object(j);
+}
+
+/* The time step and solver settings the session ran with, and where they came from. */
+static void model_json(NsJson *j, const NsRun *r)
+{
+    const NsRunSpec *sp = &r->spec;
+    static const char *const keys[7] = {"dt_s",
+                                        "tolerance",
+                                        "check_tolerance",
+                                        "lazy_threshold",
+                                        "accuracy_tip_m",
+                                        "measured_tip_error_m",
+                                        "measured_cost_ms_per_s"};
+    const double v[7] = {sp->dt,
+                         r->c.params.tau_sol,
+                         r->c.params.tau_check,
+                         r->tissue.params.lazy_threshold,
+                         sp->accuracy,
+                         sp->accuracy_tip_error,
+                         sp->accuracy_cost};
+    ns_json_key(j, "model");
+    ns_json_begin_object(j);
+    ns_json_key(j, "chosen_by");
+    ns_json_string(j, sp->model_chosen ? "accuracy" : "scenario");
+    for (int k = 0; k < (sp->model_chosen ? 7 : 4); k++) {
+        ns_json_key(j, keys[k]);
+        ns_json_number(j, v[k]);
+    }
+    if (sp->model_chosen) { /* the front's setting (live --accuracy) */
+        ns_json_key(j, "front");
+        ns_json_string(j, sp->accuracy_front);
+        ns_json_key(j, "chosen");
+        ns_json_string(j, sp->accuracy_label);
+    }
     ns_json_end_object(j);
 }
 
@@ -645,6 +691,7 @@ void ns_live_session_report(NsJson *j, void *ctx)
     ns_json_number(j, s->o.fps);
     ns_json_key(j, "ended_by");
     ns_json_string(j, ns_live_session_end_reason(s));
+    model_json(j, s->r);
     ns_json_end_object(j);
 }
 
@@ -663,9 +710,9 @@ void ns_live_session_free(NsLiveSession *s)
         ns_live_snap_free(&s->snaps[k]);
     free(s->jpeg.p);
     free(s->json.p);
-    NsSeries *series[6] = {&s->fps,       &s->rtf,       &s->latency,
-                           &s->render_ms, &s->encode_ms, &s->snap_ms};
-    for (int k = 0; k < 6; k++)
+    NsSeries *series[10] = {&s->fps,     &s->rtf,      &s->latency, &s->render_ms, &s->encode_ms,
+                            &s->snap_ms, &s->scene_ms, &s->gl_ms,   &s->step_cpu,  &s->frame_cpu};
+    for (int k = 0; k < 10; k++)
         free(series[k]->v);
     pthread_cond_destroy(&s->ctl_cv);
     pthread_cond_destroy(&s->snap_cv);

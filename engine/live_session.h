@@ -18,6 +18,7 @@ typedef struct NsLiveOpts {
     int width, height; /* the frames [pixels] */
     double fps;        /* frames a second asked for */
     int quality;       /* JPEG quality 1..100 */
+    int samples;       /* multisampling of the frames (1: none) */
     double max_lag_s;  /* how far simulated time may fall behind before the session slows */
 } NsLiveOpts;
 
@@ -61,6 +62,9 @@ void ns_live_session_report(NsJson *j, void *ctx);
 typedef struct NsLiveFigures {
     double fps_median, fps_p5, rtf_median, rtf_min, latency_median, latency_p95;
     double render_ms, encode_ms, snapshot_ms, step_ms;
+    double scene_ms, gl_ms; /* render_ms's parts: the views' vertex lists; OpenGL with read-back */
+    double step_cpu_ms,
+        frame_cpu_ms; /* the solver's and render thread's CPU time a step, a frame */
     long frames, latency_samples;
     int clients;
 } NsLiveFigures;

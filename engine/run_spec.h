@@ -70,6 +70,9 @@ typedef struct NsRunSpec {
      * its measured tip error [m] and cost [ms per simulated s] */
     double accuracy, accuracy_tip_error, accuracy_cost;
     char accuracy_front[32], accuracy_label[96];
+    /* dt and the solver settings above chosen apart from the scenario (live --accuracy, or a
+     * replayed log's #model): the control log records them */
+    bool model_chosen;
     /* live = {script, entries} (docs/live.md): a live session runs the script first only with
      * live_script; {"next_needle": true} takes live_entries in turn (none: the entry above) */
     bool live_script;

@@ -8,6 +8,8 @@ typedef struct NsSeries {
 } NsSeries;
 
 double ns_wall_s(void);
+/* The calling thread's CPU time [s]. */
+double ns_thread_cpu_s(void);
 int ns_series_push(NsSeries *s, double x);
 double ns_series_quantile(const NsSeries *s, double q);
 void ns_series_range(const NsSeries *s, double *lo, double *mean, double *hi);

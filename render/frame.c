@@ -4,16 +4,29 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <time.h>
 
 static const uint8_t background[3] = {28, 32, 40}, white[3] = {240, 242, 245}, panel[3] = {0, 0, 0};
 
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return 1e3 * (double)ts.tv_sec + 1e-6 * (double)ts.tv_nsec;
+}
+
 int ns_frame_open(NsFrame *f, int w, int h, char *err, int err_sz)
+{
+    return ns_frame_open_samples(f, w, h, 4, err, err_sz);
+}
+
+int ns_frame_open_samples(NsFrame *f, int w, int h, int samples, char *err, int err_sz)
 {
     memset(f, 0, sizeof *f);
     f->w = w;
     f->h = h;
     int px = h / 34 < 11 ? 11 : h / 34;
-    f->gl = ns_renderer_open(w, h, 4, err, err_sz);
+    f->gl = ns_renderer_open(w, h, samples, err, err_sz);
     f->font = f->gl ? ns_font_open(px, 0, err, err_sz) : NULL;
     f->small = f->font ? ns_font_open(px * 3 / 4 < 9 ? 9 : px * 3 / 4, 0, err, err_sz) : NULL;
     if (!f->small) {
@@ -68,6 +81,7 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
                     const char *const *hud, int nhud, bool legend, NsImage *out, char *err,
                     int err_sz)
 {
+    double t0 = now_ms(), build = 0.0;
     ns_renderer_clear(f->gl, background);
     int vw = f->w / (nviews > 0 ? nviews : 1);
     for (int k = 0; k < nviews; k++) {
@@ -78,7 +92,10 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
                        cam.target[2] - cam.eye[2]};
         in->px_size = 2.0 * sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) *
                       tan(0.5 * cam.fov_deg * M_PI / 180.0) / f->h;
-        if (ns_scene_build(in, (NsView)views[k], (double)w / f->h, &f->scene)) {
+        double tb = now_ms();
+        int built = ns_scene_build(in, (NsView)views[k], (double)w / f->h, &f->scene);
+        build += now_ms() - tb;
+        if (built) {
             snprintf(err, (size_t)err_sz, "out of memory building the %s view",
                      ns_view_name((NsView)views[k]));
             return -1;
@@ -88,6 +105,9 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
     }
     if (ns_renderer_read(f->gl, out, err, err_sz))
         return -1;
+    double t1 = now_ms();
+    f->build_ms = build;
+    f->gl_ms = t1 - t0 - build;
     int margin = f->h / 60 + 2;
     for (int k = 0; nviews > 1 && k < nviews; k++) { /* the views' names, bottom right */
         const char *name = ns_view_name((NsView)views[k]);
@@ -99,5 +119,6 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
     text_box(f->font, out, margin, margin, hud, nhud);
     if (legend)
         legend_box(f->small, out, margin, f->h - margin);
+    f->text_ms = now_ms() - t1;
     return 0;
 }

@@ -15,10 +15,15 @@ typedef struct NsFrame {
     NsFont *font, *small;
     int w, h;
     NsScene scene; /* reused between views and frames */
+    /* the last frame's stages [ms]: building the views' vertex lists; OpenGL (drawing is
+     * deferred by llvmpipe to the read-back, so both are here); the HUD text */
+    double build_ms, gl_ms, text_ms;
 } NsFrame;
 
 /* A renderer of w x h frames with 4x multisampling and the HUD fonts. */
 int ns_frame_open(NsFrame *f, int w, int h, char *err, int err_sz);
+/* The same with `samples` samples a pixel (1: none). */
+int ns_frame_open_samples(NsFrame *f, int w, int h, int samples, char *err, int err_sz);
 void ns_frame_close(NsFrame *f);
 
 /* Draws views[0 .. nviews) of in side by side into out (w x h), then the HUD lines (top left),

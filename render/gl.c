@@ -146,7 +146,9 @@ static const char *fs_src = "#version 330 core\n"
                             "  if (lit != 0) {\n"
                             "    vec3 n = normalize(v_n);\n"
                             "    float d = abs(dot(n, light));\n"
-                            "    c = c * (0.42 + 0.58 * d) + vec3(0.18) * pow(d, 24.0);\n"
+                            /* d^24 by squaring: llvmpipe's pow is exp2(24 log2 d) */
+                            "    float d2 = d * d, d4 = d2 * d2, d8 = d4 * d4;\n"
+                            "    c = c * (0.42 + 0.58 * d) + vec3(0.18) * (d8 * d8 * d8);\n"
                             "  }\n"
                             "  frag = vec4(min(c, vec3(1.0)), v_c.a * alpha);\n"
                             "}\n";
@@ -208,16 +210,18 @@ static int gl_setup(NsRenderer *r, char *err, int err_sz)
     for (int i = 0; i < 3; i++)
         glEnableVertexAttribArray((GLuint)i);
 
-    /* the multisampled frame, and a single-sampled one it resolves into for reading */
+    /* the multisampled frame, and a single-sampled one it resolves into for reading; with one
+     * sample the frame is single-sampled and read directly */
+    int ms = r->samples > 1 ? r->samples : 0;
     glGenFramebuffers(1, &r->fbo_ms);
     glBindFramebuffer(GL_FRAMEBUFFER, r->fbo_ms);
     glGenRenderbuffers(1, &r->rb_color);
     glBindRenderbuffer(GL_RENDERBUFFER, r->rb_color);
-    glRenderbufferStorageMultisample(GL_RENDERBUFFER, r->samples, GL_RGBA8, r->w, r->h);
+    glRenderbufferStorageMultisample(GL_RENDERBUFFER, ms, GL_RGBA8, r->w, r->h);
     glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, r->rb_color);
     glGenRenderbuffers(1, &r->rb_depth);
     glBindRenderbuffer(GL_RENDERBUFFER, r->rb_depth);
-    glRenderbufferStorageMultisample(GL_RENDERBUFFER, r->samples, GL_DEPTH_COMPONENT24, r->w, r->h);
+    glRenderbufferStorageMultisample(GL_RENDERBUFFER, ms, GL_DEPTH_COMPONENT24, r->w, r->h);
     glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, r->rb_depth);
     if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
         ns_set_err(err, err_sz, "the %dx%d framebuffer with %d samples is not supported", r->w,
@@ -393,11 +397,13 @@ int ns_renderer_draw(NsRenderer *r, const NsScene *s, int x, int y, int w, int h
 
 int ns_renderer_read(NsRenderer *r, NsImage *im, char *err, int err_sz)
 {
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo_ms);
-    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, r->fbo_rs);
     glDisable(GL_SCISSOR_TEST);
-    glBlitFramebuffer(0, 0, r->w, r->h, 0, 0, r->w, r->h, GL_COLOR_BUFFER_BIT, GL_NEAREST);
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo_rs);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo_ms);
+    if (r->samples > 1) {
+        glBindFramebuffer(GL_DRAW_FRAMEBUFFER, r->fbo_rs);
+        glBlitFramebuffer(0, 0, r->w, r->h, 0, 0, r->w, r->h, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+        glBindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo_rs);
+    }
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glReadPixels(0, 0, r->w, r->h, GL_RGBA, GL_UNSIGNED_BYTE, r->rgba);
     glBindFramebuffer(GL_FRAMEBUFFER, r->fbo_ms);

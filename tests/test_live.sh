@@ -145,5 +145,42 @@ else
     fail "bench --live" "$(tail -3 "$TMP/bench.err")"
 fi
 
+# ---- --accuracy: dt and solver settings from the measured front; the log's #model; its replay ----
+OUT4="$TMP/accuracy"
+if (timeout 300 "$BIN" bench --live "$SRC/scenarios/tutorial.lua" --seconds 3 --accuracy 0.5e-3 \
+    --front brachytherapy --json --width 320 --height 180 -o "$OUT4" >"$TMP/acc.json" \
+    2>"$TMP/acc.err") &&
+    grep -q '^#model dt=0.02 tolerance=9.99.*e-07 check_tolerance=9.99.*e-05 lazy_threshold=0.05' \
+        "$OUT4/controls.csv" &&
+    "$PY" - "$OUT4/report.json" <<'PY'; then
+import json, sys
+m = json.load(open(sys.argv[1]))["live"]["model"]
+assert m["chosen_by"] == "accuracy" and m["dt_s"] == 0.02 and m["front"] == "brachytherapy", m
+assert m["tolerance"] == 1e-6 and m["lazy_threshold"] == 0.05, m
+assert 0 < m["measured_tip_error_m"] <= 0.5e-3, m
+PY
+    pass "accuracy: the front's dt and settings, in the log (#model) and the report"
+    if "$BIN" run "$SRC/scenarios/tutorial.lua" --replay "$OUT4/controls.csv" -o "$TMP/replay4" \
+        --no-render --quiet 2>"$TMP/replay4.err" &&
+        "$PY" - "$OUT4/report.json" "$TMP/replay4/report.json" <<'PY'; then
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+assert a["state_hash"] == b["state_hash"] and a["score"]["total"] == b["score"]["total"]
+assert a["steps"] == b["steps"] and b["dt_s"] == 0.02, (a["steps"], b["steps"], b["dt_s"])
+PY
+        pass "accuracy: the replay steps by the log's dt to the same state hash and score"
+    else
+        fail "accuracy: replay" "$(tail -2 "$TMP/replay4.err")"
+    fi
+else
+    fail "accuracy" "$(tail -3 "$TMP/acc.err")"
+fi
+"$BIN" live "$SRC/scenarios/tutorial.lua" --accuracy 1e-3 --port 0 -o "$TMP/acc_refused" \
+    >/dev/null 2>"$TMP/acc_refused.err"
+rc=$?
+[ $rc -eq 1 ] && grep -q "no setting measured on the 'phantom' front" "$TMP/acc_refused.err" &&
+    pass "accuracy: a bound no measured setting meets is refused" ||
+    fail "accuracy: refusal" "exit $rc: $(tail -1 "$TMP/acc_refused.err")"
+
 echo "$PASSED passed, $FAILED failed"
 [ "$FAILED" -eq 0 ]

@@ -257,6 +257,10 @@ bad_log log_spin '10s/,[^,]*,\([^,]*\)$/,1000,\1/' "log_spin.csv:10: twist_rate_
 bad_log log_bad_hash '3s/ .*/ 12345/' "log_bad_hash.csv:3: #scenario_hash must be 16 hex digits \(got '12345'\)"
 bad_log log_bad_trainee '3a#trainee a/b' "log_bad_trainee.csv:4: #trainee must be 1 to 64 characters"
 bad_log log_other_hash '3s/ .*/ 0123456789abcdef/' "log_other_hash.csv:3: recorded against scenario 'tutorial' \(hash 0123456789abcdef\), not 'tutorial'"
+# #model (a live session's own dt and solver settings): malformed; rows that do not step by its dt.
+bad_log log_bad_model '3a#model dt=0.02 tolerance=1e-6' "log_bad_model.csv:4: #model must be 'dt=D tolerance=T"
+bad_log log_model_dt '3a#model dt=0.02 tolerance=1e-08 check_tolerance=1e-06 lazy_threshold=0.01' \
+    "log_model_dt.csv:7: t_s is 0.01 but row 2 of a run stepping by dt = 0.02 s"
 # Rows: at most NS_LIMIT_STEPS (2,000,000).
 python3 - "$TMP/t1.csv" "$TMP/log_rows.csv" <<'PY'
 import sys
