@@ -161,7 +161,7 @@ static double tip_difference(const NsRun *a, const NsRun *b, long *steps)
 typedef struct BenchArgs {
     bool json;
     bool snapshot; /* --snapshot: measure the world's in-memory snapshot and restore at the end */
-    int compare; /* the solver to compare with, or -1 */
+    int compare;   /* the solver to compare with, or -1 */
     int repeat;
 } BenchArgs;
 
@@ -422,11 +422,12 @@ static void bench_print_text(const BenchOut *b)
                    b->rmed[2], b->rlo[2], b->rhi[2], b->rmed[3], b->rlo[3], b->rhi[3]);
     }
     if (b->snap)
-        printf("\nworld snapshot at step %ld (in memory, medians of %d): %.1f MB, snapshot %.2f ms, "
-               "restore %.2f ms; the restored world %s\n",
-               b->runs[0].steps, SNAPSHOT_REPEAT, 1e-6 * b->snap->bytes, b->snap->snapshot_ms,
-               b->snap->restore_ms,
-               b->snap->same ? "snapshots to the same bytes" : "DIFFERS from the original");
+        printf(
+            "\nworld snapshot at step %ld (in memory, medians of %d): %.1f MB, snapshot %.2f ms, "
+            "restore %.2f ms; the restored world %s\n",
+            b->runs[0].steps, SNAPSHOT_REPEAT, 1e-6 * b->snap->bytes, b->snap->snapshot_ms,
+            b->snap->restore_ms,
+            b->snap->same ? "snapshots to the same bytes" : "DIFFERS from the original");
 }
 
 int ns_cmd_bench(int argc, char **argv)
@@ -523,8 +524,8 @@ int ns_cmd_bench(int argc, char **argv)
             ns_run_free(&runs[k]);
         return 1;
     }
-    BenchOut out = {&o,           runs, nruns, compare,  repeat, done, speedup,
-                    speedup_mean, diff, agree, compared, {0},    {0},  {0}, NULL};
+    BenchOut out = {&o,   runs,  nruns,    compare, repeat, done, speedup, speedup_mean,
+                    diff, agree, compared, {0},     {0},    {0},  NULL};
     out.snap = args.snapshot ? &snap : NULL;
     memcpy(out.rmed, rmed, sizeof rmed);
     memcpy(out.rlo, rlo, sizeof rlo);

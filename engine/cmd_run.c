@@ -170,7 +170,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             if (*end || !(t > 0.0) || !(t <= NS_LIMIT_SIM_TIME_MAX))
                 return usage_error("--checkpoint-at '%s': expected a time in seconds, > 0", v);
             if (!argv[i + 2][0] || argv[i + 2][0] == '-')
-                return usage_error("--checkpoint-at T FILE: expected a file, got '%s'", argv[i + 2]);
+                return usage_error("--checkpoint-at T FILE: expected a file, got '%s'",
+                                   argv[i + 2]);
             o->checkpoint_at = t;
             o->checkpoint = argv[i + 2];
             i += 2;

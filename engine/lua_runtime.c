@@ -111,8 +111,8 @@ static void *limited_alloc(void *ud, void *ptr, size_t osize, size_t nsize)
         rt->memory -= old;
         return NULL;
     }
-    if (nsize > old && (rt->memory - old + nsize > lua_memory_limit ||
-                        rt->memory_hits > NS_LUA_MEMORY_RETRIES)) {
+    if (nsize > old &&
+        (rt->memory - old + nsize > lua_memory_limit || rt->memory_hits > NS_LUA_MEMORY_RETRIES)) {
         rt->memory_hits++;
         return NULL;
     }
@@ -772,8 +772,7 @@ NsLua *ns_lua_open(const char *scenario_path, char *err, int err_sz)
     *(NsLua **)lua_getextraspace(rt->L) = rt;
     lua_atpanic(rt->L, panic);
     rt->hook_mask = LUA_MASKCOUNT;
-    ns_lua_begin_phase(rt, "loading the scenario", load_instructions,
-                       NS_LIMIT_LOAD_SECONDS, 0.0);
+    ns_lua_begin_phase(rt, "loading the scenario", load_instructions, NS_LIMIT_LOAD_SECONDS, 0.0);
     lua_pushcfunction(rt->L, open_sandbox);
     if (ns_lua_call(rt, 0, 0, err, err_sz) != 0) {
         ns_lua_close(rt);

@@ -32,11 +32,11 @@
 /* The header: settings a resumed run must share with the run that wrote it. */
 typedef struct NsCheckpointHeader {
     char magic[8];
-    uint64_t fingerprint;   /* ns_pack_fingerprint of the writer */
-    char version[64];       /* NS_VERSION */
+    uint64_t fingerprint;       /* ns_pack_fingerprint of the writer */
+    char version[64];           /* NS_VERSION */
     unsigned char build_id[32]; /* the writer's ELF build ID (its first 32 bytes; 0s if none) */
-    uint64_t scenario_hash; /* FNV-1a of the scenario file's bytes (control_log.h) */
-    uint64_t replay_hash;   /* of the --replay log, 0 without one */
+    uint64_t scenario_hash;     /* FNV-1a of the scenario file's bytes (control_log.h) */
+    uint64_t replay_hash;       /* of the --replay log, 0 without one */
     int nsets;
     char sets[32][256];
     long steps_opt; /* --steps (0: none) */
@@ -166,9 +166,9 @@ static int run_state_pack(NsPack *p, NsRun *r)
     NS_PACK(p, r->event_n);
     NS_PACK(p, r->event_cap);
     REPACK(p, r->events, r->event_n, r->event_cap);
-    if (!p->writing && (r->seed_n < 0 || r->seed_n > r->seed_cap || r->event_n < 0 ||
-                        r->event_n > r->event_cap || !r->target_hint || !r->marker_hint ||
-                        !r->obst))
+    if (!p->writing &&
+        (r->seed_n < 0 || r->seed_n > r->seed_cap || r->event_n < 0 || r->event_n > r->event_cap ||
+         !r->target_hint || !r->marker_hint || !r->obst))
         ns_pack_fail(p, "bad run state");
     /* The tip-reached moments taken (pictures): a run that renders keeps them. */
     bool *reached = calloc((size_t)sp->target_count + 1, sizeof *reached);
@@ -326,8 +326,8 @@ static int mismatch(const NsRun *r, const char *what, char *err, int err_sz)
 int ns_run_checkpoint_open(NsRun *r, char *err, int err_sz)
 {
     long long size = 0;
-    int fd = ns_file_open_regular(r->opt.resume, (long long)NS_PACK_MAX_BYTES, "checkpoint",
-                                  &size, err, err_sz);
+    int fd = ns_file_open_regular(r->opt.resume, (long long)NS_PACK_MAX_BYTES, "checkpoint", &size,
+                                  err, err_sz);
     if (fd < 0)
         return -1;
     r->resume_f = fdopen(fd, "rb");

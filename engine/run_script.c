@@ -462,10 +462,10 @@ int ns_run_script_replay_tick(NsRun *r, long k, char *err, int err_sz)
     if (ns_lua_call(r->sc.lua, 1, 0, err, err_sz) != 0)
         return -1;
     const NsControl *a = &v->ctl, *b = &io.ctl;
-    bool same = io.more == v->more && a->v_insert == b->v_insert &&
-                a->twist_rate == b->twist_rate && memcmp(a->v_base, b->v_base, sizeof a->v_base) == 0 &&
-                a->drop_seed == b->drop_seed && a->next_needle == b->next_needle &&
-                (!a->next_needle || entry_same(&a->entry, &b->entry));
+    bool same =
+        io.more == v->more && a->v_insert == b->v_insert && a->twist_rate == b->twist_rate &&
+        memcmp(a->v_base, b->v_base, sizeof a->v_base) == 0 && a->drop_seed == b->drop_seed &&
+        a->next_needle == b->next_needle && (!a->next_needle || entry_same(&a->entry, &b->entry));
     if (!same)
         ns_set_err(err, err_sz,
                    "%s: the script did not repeat its course at step %ld of the checkpoint (does "

@@ -24,14 +24,14 @@
 
 typedef struct NsPack {
     bool writing;
-    FILE *f;             /* the file, or NULL: the memory buffer */
-    unsigned char *buf;  /* memory: the bytes (owned by a writer; a reader's are borrowed) */
-    size_t len, cap;     /* memory: bytes in buf, allocated */
-    size_t pos;          /* bytes read or written so far */
-    size_t size;         /* reading: the stream's length (file or buffer) */
-    size_t allocated;    /* reading: bytes allocated for arrays so far */
-    uint64_t sum;        /* FNV-1a 64 over the 8-byte words so far (little-endian) */
-    uint64_t tail;       /* the bytes after the last whole word (ntail of them) */
+    FILE *f;            /* the file, or NULL: the memory buffer */
+    unsigned char *buf; /* memory: the bytes (owned by a writer; a reader's are borrowed) */
+    size_t len, cap;    /* memory: bytes in buf, allocated */
+    size_t pos;         /* bytes read or written so far */
+    size_t size;        /* reading: the stream's length (file or buffer) */
+    size_t allocated;   /* reading: bytes allocated for arrays so far */
+    uint64_t sum;       /* FNV-1a 64 over the 8-byte words so far (little-endian) */
+    uint64_t tail;      /* the bytes after the last whole word (ntail of them) */
     int ntail;
     bool failed;
     char err[256]; /* the first failure */
@@ -103,15 +103,15 @@ struct NsRemeshStack;
 struct NsSolver;
 struct NsCoupled;
 struct NsArena;
-int ns_mesh_pack(NsPack *p, struct NsMesh *m);                  /* sim/mesh.c */
-int ns_block_matrix_pack(NsPack *p, struct NsBlockMatrix *A);   /* sim/sparse.c */
-int ns_banded_pack(NsPack *p, struct NsBanded *B);              /* sim/banded.c */
-int ns_tissue_pack(NsPack *p, struct NsTissue *t);              /* sim/tissue.c */
-int ns_rod_pack(NsPack *p, struct NsRod *r);                    /* sim/rod.c */
-int ns_needle_path_pack(NsPack *p, struct NsNeedlePath *path);  /* sim/needle_path.c */
+int ns_mesh_pack(NsPack *p, struct NsMesh *m);                 /* sim/mesh.c */
+int ns_block_matrix_pack(NsPack *p, struct NsBlockMatrix *A);  /* sim/sparse.c */
+int ns_banded_pack(NsPack *p, struct NsBanded *B);             /* sim/banded.c */
+int ns_tissue_pack(NsPack *p, struct NsTissue *t);             /* sim/tissue.c */
+int ns_rod_pack(NsPack *p, struct NsRod *r);                   /* sim/rod.c */
+int ns_needle_path_pack(NsPack *p, struct NsNeedlePath *path); /* sim/needle_path.c */
 /* The path with its arrays in allocations of cap entries (>= count; NsCoupled.path_cap). */
 int ns_needle_path_pack_cap(NsPack *p, struct NsNeedlePath *path, int cap);
-int ns_remesh_stack_pack(NsPack *p, struct NsRemeshStack *s);   /* sim/remesh_stack.c */
+int ns_remesh_stack_pack(NsPack *p, struct NsRemeshStack *s); /* sim/remesh_stack.c */
 /* A solver (NULL allowed both ways): writing waits for a background refactorization to finish
  * (without adopting it: it is packed as pending); reading creates the solver. sim/solver.c */
 int ns_solver_pack(NsPack *p, struct NsSolver **s);
@@ -131,8 +131,8 @@ typedef struct NsWorldSnapshot {
     unsigned char *bytes;
     size_t len;
 } NsWorldSnapshot;
-int ns_world_snapshot(struct NsTissue *t, struct NsRod *r, struct NsCoupled *c,
-                      NsWorldSnapshot *s, char *err, int err_sz);
+int ns_world_snapshot(struct NsTissue *t, struct NsRod *r, struct NsCoupled *c, NsWorldSnapshot *s,
+                      char *err, int err_sz);
 /* Fills t, r, c from nothing (free the old world first, or pass fresh structures). Returns 0,
  * or -1 with a message (memory); the structures can be freed either way. */
 int ns_world_restore(const NsWorldSnapshot *s, struct NsTissue *t, struct NsRod *r,
@@ -147,7 +147,7 @@ void ns_world_snapshot_free(NsWorldSnapshot *s);
                         (blank))
 
 /* Bytes one snapshot may allocate when read (a guard against a damaged file asking for more
- * memory than the machine has; the brachytherapy world is about 60 MB). */
+ * memory than the machine has; the brachytherapy world is about 73 MB at its second needle). */
 #define NS_PACK_MAX_BYTES ((size_t)16 << 30)
 
 #endif
