@@ -171,11 +171,10 @@ int ns_run_place_needle(NsRun *r, const char *what, char *err, int err_sz)
         cp.tau_check = cp.tau_sol;
     for (int k = 0; k < sc->region_count; k++)
         cp.cut_force[k] = sc->regions[k].material.cut_force;
-    if (sp->steer_arc) { /* needle.steering = "arc" */
-        cp.bevel_model = NS_BEVEL_ARC;
+    cp.bevel_model = (NsBevelModel)sp->steering; /* needle.steering */
+    if (sp->steering == NS_BEVEL_ARC)
         for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
             cp.bevel_curvature[k] = sp->arc_curvature;
-    }
     /* One friction per unit length for the whole needle: that of the region at the entry. */
     int t0 = M->node_tets[nodes[0]].items[0];
     cp.f_perlen = sc->regions[M->tet_region[t0]].material.friction;

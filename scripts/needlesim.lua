@@ -884,7 +884,8 @@ local NEEDLE_KINDS = {
 --- ns.needle{kind, diameter, inner_diameter, youngs, density, tip, bevel_deg, steering, curvature}
 -- `kind` ("stiff" or "flexible", default "stiff") gives every field not given. `steering` is
 -- how a bevel tip steers (docs/remeshing.md): "force" (the default: a lateral force at the
--- tip) or "arc" (the nonholonomic model: the cut turns at curvature * tan(bevel) [1/m]).
+-- tip), "displacement" (the paper's §3.5: each cut moved sideways by d * tan(bevel)) or "arc"
+-- (the nonholonomic model: the cut turns at curvature * tan(bevel) [1/m]).
 function ns.needle(t)
     local where = where_of(2)
     local a = args(t, "ns.needle", where, NEEDLE_FIELDS)
@@ -899,7 +900,7 @@ function ns.needle(t)
         tip = a:choice("tip", { "bevel", "symmetric" }, d.tip),
         bevel_deg = a:number("bevel_deg", function(x) return x > 0 and x < 90 end,
             "in (0, 90) [degrees]", d.bevel_deg),
-        steering = a:choice("steering", { "force", "arc" }, "force"),
+        steering = a:choice("steering", { "force", "displacement", "arc" }, "force"),
         curvature = a:number("curvature", GT0, "> 0 [1/m]", 10),
         where = where,
     }

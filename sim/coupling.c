@@ -5,6 +5,7 @@
  * (§3.4.2). */
 #include "coupling.h"
 #include "coupling_internal.h"
+#include "mutate.h"
 #include "quality.h"
 #include "snapshot.h"
 
@@ -138,6 +139,11 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     c->tissue = tissue;
     c->rod = rod;
     c->params = params ? *params : ns_default_coupling_params();
+    c->params.f_perlen = NS_MUTATE("friction", c->params.f_perlen);
+    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++) {
+        c->params.bevel_force[k] = NS_MUTATE("bevel_force", c->params.bevel_force[k]);
+        c->params.bevel_curvature[k] = NS_MUTATE("bevel_arc", c->params.bevel_curvature[k]);
+    }
     const NsCouplingParams *q = &c->params;
     int bad_bevel = q->bevel_model != NS_BEVEL_FORCE && q->bevel_model != NS_BEVEL_DISPLACEMENT &&
                     q->bevel_model != NS_BEVEL_ARC;

@@ -4,6 +4,7 @@
  * and the physical outcomes at the tip (bone contact, far-side exit, withdrawal; issue 32,
  * docs/remeshing.md). */
 #include "coupling_internal.h"
+#include "mutate.h"
 #include "quality.h"
 
 #include <math.h>
@@ -318,7 +319,7 @@ static int bevel_displace(const NsCoupled *c, TipCut *m)
     ns_rod_tip_frame(r, tt, m1, m2);
     for (int i = 0; i < 3; i++)
         d += (u_new[i] - M->u[3 * m->tipn + i]) * (u_new[i] - M->u[3 * m->tipn + i]);
-    d = sqrt(d) * tan(r->params.bevel_angle);
+    d = sqrt(d) * NS_MUTATE("bevel_disp", tan(r->params.bevel_angle));
     for (int i = 0; i < 3; i++)
         u_new[i] += d * m2[i];
     return ns_mesh_locate(M, u_new, m->t, 1e-9, NULL) < 0 ? -1 : 0;

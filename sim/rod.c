@@ -9,6 +9,7 @@
 #include <time.h>
 
 #include "err.h"
+#include "mutate.h"
 #include "rod_internal.h"
 #include "snapshot.h"
 
@@ -808,8 +809,8 @@ int ns_rod_init(NsRod *r, const double *x, int n, const double *d1, int held,
     double G = m->shear > 0.0 ? m->shear : m->youngs / (2.0 * (1.0 + m->poisson));
     double I = 0.25 * M_PI * (ro * ro * ro * ro - ri * ri * ri * ri);
     r->area = M_PI * (ro * ro - ri * ri);
-    r->bend_stiff = m->youngs * I;
-    r->twist_stiff = G * 2.0 * I; /* J = 2 I for a circular (hollow) section */
+    r->bend_stiff = NS_MUTATE("ei", m->youngs * I);
+    r->twist_stiff = NS_MUTATE("gj", G * 2.0 * I); /* J = 2 I for a circular (hollow) section */
     r->stretch_stiff = p.stretch_scale * m->youngs * r->area;
     r->lin_density = m->density * r->area;
     memcpy(r->x, x, 3 * (size_t)n * sizeof(double));
