@@ -1,0 +1,49 @@
+/* Torsional friction between the needle's shaft and the tissue: a stick/slip torque on the twist
+ * of every edge inside the tissue (the paper's §5 lists torsional friction as future work; the
+ * model follows Reed, Okamura and Cowan 2009, "Modeling and control of needles with torsional
+ * friction", IEEE TBME 56(12):2905-2916: Coulomb friction distributed along the inserted shaft).
+ *
+ * Edge j's material angle theta_j (relative to its reference frame, which is carried by parallel
+ * transport in time and so has no spin about the tangent, Bergou et al. 2010 §4.2) is held by a
+ * friction torque of at most c_j [N m]: it keeps the angle it had at the start of the step
+ * (theta_anchor_j, stick) unless the elastic torque on it exceeds c_j, and then it turns with a
+ * torque of exactly c_j against its turn (slip). The quasi-static twist (rod.c) minimises the
+ * incremental potential
+ *     E_twist+bend(theta) - tip_torque theta_last + sum_j c_j |theta_j - theta_anchor_j|,
+ * convex where E is, whose optimality conditions are exactly stick (|torque| <= c_j) or slip
+ * (torque c_j against the turn).
+ *
+ * The bound per unit length inside the tissue is tau_f = f_perlen r_o: the sliding friction per
+ * unit length f_perlen (sim/coupling.h) is the integral of the shear traction the tissue can hold
+ * around the shaft's circumference; the same traction acting tangentially around a shaft of outer
+ * radius r_o gives at most f_perlen r_o of torque per unit length. */
+#ifndef NS_TWIST_FRICTION_H
+#define NS_TWIST_FRICTION_H
+
+struct NsCoupled; /* sim/coupling.h */
+
+/* Work doubles ns_twist_friction_step needs for ne edges. */
+#define NS_TWIST_FRICTION_WORK(ne) (6 * (size_t)(ne))
+
+/* One Newton step of the twist with friction: minimises, over dx with dx_j = 0 for j < first,
+ *     1/2 dx^T H dx + g^T dx + sum_j bound_j |theta_j + dx_j - anchor_j|
+ * for the tridiagonal H (diagonal hd (ne), off-diagonal ho (ne - 1): H_{j,j+1} = ho_j) by a
+ * primal-dual active set (each edge with a bound either sticks at its anchor or slips with a
+ * constant torque of bound_j; Hintermueller, Ito and Kunisch 2002, SIAM J. Optim. 13(3)). The
+ * sets are exact when they stop changing. Returns the active-set iterations (>= 1), or -1 if a
+ * pivot was not positive or the sets did not settle in 4 ne + 20 iterations. */
+int ns_twist_friction_step(int ne, int first, const double *hd, const double *ho, const double *g,
+                           const double *theta, const double *anchor, const double *bound,
+                           double *dx, double *work);
+
+/* sum_j bound_j |theta_j - anchor_j| over the ne edges [J]. */
+double ns_twist_friction_energy(int ne, const double *theta, const double *anchor,
+                                const double *bound);
+
+/* Sets c->rod->twist_fric for the step about to be taken: tau_f l_j (l_j the rest length) on
+ * every edge whose two nodes are coupled to the tissue (the edges the sliding friction counts,
+ * sim/coupled_assemble.c), tau_f = f_perlen r_o, and 0 elsewhere; all 0 when
+ * c->params.twist_friction is 0. */
+void ns_coupled_twist_bounds(struct NsCoupled *c);
+
+#endif
