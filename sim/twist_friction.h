@@ -29,9 +29,11 @@ struct NsCoupled; /* sim/coupling.h */
  *     1/2 dx^T H dx + g^T dx + sum_j bound_j |theta_j + dx_j - anchor_j|
  * for the tridiagonal H (diagonal hd (ne), off-diagonal ho (ne - 1): H_{j,j+1} = ho_j) by a
  * primal-dual active set (each edge with a bound either sticks at its anchor or slips with a
- * constant torque of bound_j; Hintermueller, Ito and Kunisch 2002, SIAM J. Optim. 13(3)). The
- * sets are exact when they stop changing. Returns the active-set iterations (>= 1), or -1 if a
- * pivot was not positive or the sets did not settle in 4 ne + 20 iterations. */
+ * constant torque of bound_j; Hintermueller, Ito and Kunisch 2002, SIAM J. Optim. 13(3)), exact
+ * when the sets stop changing. Where the sets cycle (H not an M-matrix: a bent rod's
+ * bending-twist terms), cyclic coordinate descent (converging for any definite H) gives the sets
+ * to start again from, or, if those do not settle either, its own answer. Returns the work done
+ * (>= 1), or -1 if H is not definite. */
 int ns_twist_friction_step(int ne, int first, const double *hd, const double *ho, const double *g,
                            const double *theta, const double *anchor, const double *bound,
                            double *dx, double *work);
