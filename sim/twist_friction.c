@@ -1,12 +1,9 @@
 /* Torsional friction between the needle's shaft and the tissue (see twist_friction.h): the
- * twist's Newton step with stick/slip torques, and the bounds the coupling sets per edge. */
+ * twist's Newton step with stick/slip torques. */
 #include "twist_friction.h"
 
 #include <math.h>
 #include <stddef.h>
-
-#include "coupling.h"
-#include "rod.h"
 
 /* Edge states of the active set. */
 #define TF_FIXED 0.0 /* j < first: held (dx 0) */
@@ -171,16 +168,4 @@ double ns_twist_friction_energy(int ne, const double *theta, const double *ancho
         if (bound[j] > 0.0)
             e += bound[j] * fabs(theta[j] - anchor[j]);
     return e;
-}
-
-void ns_coupled_twist_bounds(NsCoupled *c)
-{
-    NsRod *r = c->rod;
-    int ne = r->nodes - 1;
-    double tau_f = c->params.twist_friction
-                       ? c->params.f_perlen * 0.5 * r->params.material.outer_diameter
-                       : 0.0;
-    for (int j = 0; j < ne; j++)
-        r->twist_fric[j] =
-            tau_f > 0.0 && c->ta[j] >= 0 && c->ta[j + 1] >= 0 ? tau_f * r->rest_len[j] : 0.0;
 }

@@ -16,11 +16,11 @@
  * The bound per unit length inside the tissue is tau_f = f_perlen r_o: the sliding friction per
  * unit length f_perlen (sim/coupling.h) is the integral of the shear traction the tissue can hold
  * around the shaft's circumference; the same traction acting tangentially around a shaft of outer
- * radius r_o gives at most f_perlen r_o of torque per unit length. */
+ * radius r_o gives at most f_perlen r_o of torque per unit length. The coupling sets the bounds
+ * per edge (coupled_twist_bounds, sim/coupled_assemble.c); the rod solves the twist with them
+ * (sim/rod.c). */
 #ifndef NS_TWIST_FRICTION_H
 #define NS_TWIST_FRICTION_H
-
-struct NsCoupled; /* sim/coupling.h */
 
 /* Work doubles ns_twist_friction_step needs for ne edges. */
 #define NS_TWIST_FRICTION_WORK(ne) (6 * (size_t)(ne))
@@ -41,11 +41,5 @@ int ns_twist_friction_step(int ne, int first, const double *hd, const double *ho
 /* sum_j bound_j |theta_j - anchor_j| over the ne edges [J]. */
 double ns_twist_friction_energy(int ne, const double *theta, const double *anchor,
                                 const double *bound);
-
-/* Sets c->rod->twist_fric for the step about to be taken: tau_f l_j (l_j the rest length) on
- * every edge whose two nodes are coupled to the tissue (the edges the sliding friction counts,
- * sim/coupled_assemble.c), tau_f = f_perlen r_o, and 0 elsewhere; all 0 when
- * c->params.twist_friction is 0. */
-void ns_coupled_twist_bounds(struct NsCoupled *c);
 
 #endif
