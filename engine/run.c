@@ -171,6 +171,7 @@ int ns_run_place_needle(NsRun *r, const char *what, char *err, int err_sz)
         cp.tau_check = cp.tau_sol;
     for (int k = 0; k < sc->region_count; k++)
         cp.cut_force[k] = sc->regions[k].material.cut_force;
+    cp.twist_friction = sp->twist_friction;      /* needle.twist_friction */
     cp.bevel_model = (NsBevelModel)sp->steering; /* needle.steering */
     if (sp->steering == NS_BEVEL_ARC)
         for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)

@@ -462,6 +462,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
                                                               : -1;
         free(steer);
         spec->arc_curvature = num_field(L, ni, "curvature", 10.0);
+        spec->twist_friction = bool_field(L, ni, "twist_friction", true);
     } else {
         spec->needle_kind = malloc(6);
         if (spec->needle_kind)
@@ -474,6 +475,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         spec->bevel_deg = 30.0;
         spec->steering = NS_BEVEL_FORCE;
         spec->arc_curvature = 10.0;
+        spec->twist_friction = true;
     }
     lua_pop(L, 1);
     if (raw_field(L, si, "entry") == LUA_TTABLE) {

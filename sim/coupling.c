@@ -31,6 +31,7 @@ NsCouplingParams ns_default_coupling_params(void)
     memset(&p, 0, sizeof p);
     p.f_perlen = 10.0; /* N/m: needle-tissue friction of soft tissue, order of Crouch 2005 */
     p.eta = 0.0;
+    p.twist_friction = 1;
     /* §3.6.1 used 1e-3 and 1e-5 in its own units. Here the residual is that of the system scaled
      * to a unit diagonal (coupled_paper.c); at 1e-3 / 1e-5 the friction checks flip on solver
      * error (ten-trial failures, a needle that ran away in friction-stick), at 1e-6 / 1e-8 they
@@ -152,12 +153,13 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
                      !(q->bevel_curvature[k] >= 0.0 && isfinite(q->bevel_curvature[k]));
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
-        q->refresh_iterations < 0 || bad_bevel ||
+        q->refresh_iterations < 0 || bad_bevel || (q->twist_friction & ~1) ||
         !(q->remesh_dihedral_floor >= 0.0 && q->remesh_dihedral_floor <= 60.0) ||
         (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
                  "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper, "
+                 "twist_friction 0 or 1, "
                  "remesh_dihedral_floor in [0, 60] deg, "
                  "bevel model force, displacement or arc with finite bevel forces and "
                  "curvatures >= 0");

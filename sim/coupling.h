@@ -81,6 +81,9 @@ typedef enum NsBevelModel {
 typedef struct NsCouplingParams {
     double f_perlen; /* friction per unit length inside the tissue [N/m] */
     double eta;      /* viscous friction per unit length [N s/m^2] */
+    /* 1: torsional stick/slip friction on the twist of the edges inside the tissue, bounded by
+     * f_perlen r_o per unit length (sim/twist_friction.h); 0: the paper's model (none) */
+    int twist_friction;
     double cut_force[NS_COUPLING_MAX_REGIONS]; /* f_cut by tissue region [N] */
     double tau_check, tau_sol;                 /* relative residuals (§3.6.1: 1e-3, 1e-5) */
     int max_trials;                            /* friction configurations tried per step (10) */

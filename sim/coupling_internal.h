@@ -22,6 +22,11 @@ void coupled_tissue_point(const NsCoupled *c, int i, const double *v, double *ou
 int coupled_bevel_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
                        double **et, double **er);
 int coupled_count(const NsCoupled *c); /* coupling nodes now */
+/* Sets c->rod->twist_fric for the step about to be taken (sim/twist_friction.h): tau_f l_j (l_j
+ * the rest length) on every edge whose two nodes are coupled to the tissue (the edges the sliding
+ * friction counts), tau_f = f_perlen r_o, and 0 elsewhere; all 0 when params.twist_friction is
+ * 0. */
+void coupled_twist_bounds(NsCoupled *c);
 /* Scratch sizes of the system of q coupling nodes: doubles, ints (and q + 1 bytes). */
 size_t coupled_system_doubles(int q);
 size_t coupled_system_ints(int q);
