@@ -23,7 +23,7 @@ return ns.scenario {
         resolution = h,
         material = ns.material {
             name = "gel", youngs = ns.param("youngs", 20e3), poisson = 0.45, density = 1040,
-            damping = 5, friction = 30, cut_force = 0.3,
+            damping = 5, friction = ns.param("friction", 30), cut_force = ns.param("cut_force", 0.3),
         },
         fixed_faces = { "zmax" },
     },
