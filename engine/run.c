@@ -494,10 +494,10 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
                    "failed: %s (NaN %d, inverted %d, unconverged %d)",
                    r->sc.path, r->steps, t, 1e3 * tp[0], 1e3 * tp[1], 1e3 * tp[2],
                    1e3 * ns_run_depth(r),
-                   outside         ? "the needle tip left the tissue other than through its "
-                                     "entry or out through its surface"
-                   : r->c.error[0] ? r->c.error
-                                   : "the coupled step did not produce a valid state",
+                   r->c.error[0] ? r->c.error
+                   : outside     ? "the needle tip left the tissue other than through its "
+                                   "entry or out through its surface"
+                                 : "the coupled step did not produce a valid state",
                    st.nan_count, st.inverted, st.unconverged);
         return -1;
     }

@@ -53,7 +53,7 @@ int coupled_reenter(NsCoupled *c, NsCouplingStats *st)
     int first = n - 1;
     while (first > 0 && ns_mesh_locate_in(M, M->x, r->x + 3 * (first - 1), t, 1e-9, NULL) >= 0)
         first--;
-    if (first <= r->held) {
+    if (first < r->held) {
         snprintf(c->error, sizeof c->error,
                  "re-entry: the needle is inside the tissue up to its holder (it re-entered "
                  "more than its free length in one step): take smaller steps");

@@ -193,9 +193,11 @@ int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st)
     }
     if (first < 0)
         return reparameterize_free(c, st);
-    if (c->outside) { /* withdrawn this step: the needle keeps its solved shape, coupled nowhere */
+    if (c->outside) { /* withdrawn this step: the needle keeps its solved shape, coupled nowhere,
+                       * and its edges split and merge as a free needle's (a retraction that ate
+                       * the edge at the sleeve this step must merge it before the next) */
         coupled_from_path(c, 0, 0);
-        return 0;
+        return reparameterize_free(c, st);
     }
     /* Out through the far side this step: the needle's tip, outside, stays free beyond the exit
      * node. */
