@@ -24,6 +24,11 @@ Writes docs/stability.csv, docs/stability.png (gnuplot) and prints the table doc
 holds.
 
     python3 tools/stability_map.py [--bin build/needlesim] [--out docs] [--solvers schur,paper]
+        [--needles stiff,flexible] [--merge CSV...]
+
+--merge adds the rows of earlier runs' csv files (those of a solver and needle measured now are
+dropped), so that the map can be made in parts (`--solvers "" --merge A.csv B.csv` only
+merges, tabulates and charts).
 
 A benchmark, not a test (about an hour on the 2-core machine for both solvers; run it niced).
 """
@@ -235,6 +240,19 @@ def main():
             "reason", "steps", "nan", "inverted", "unconverged", "lcp_unresolved_fraction",
             "min_dihedral_deg", "tip_error_mm", "median_step_ms", "finer_tip_mm",
             "finer_energy_rel", "events"]
+    for m in a.merge:  # the earlier rows (read before the csv is written: it may be one of them)
+        for r in csv.DictReader(open(m)):
+            if any(r["solver"] == q["solver"] and r["needle"] == q["needle"] for q in rows):
+                continue  # measured again now
+            for k in ("dt", "youngs", "speed"):
+                r[k] = float(r[k])
+            rows.append(r)
+            if r["solver"] not in solvers:
+                solvers.append(r["solver"])
+    solvers.sort(key=SOLVERS.index)
+    rows.sort(key=lambda r: (SOLVERS.index(r["solver"]), NEEDLES.index(r["needle"]),
+                             YOUNGS.index(r["youngs"]), SPEEDS.index(r["speed"]),
+                             r["motion"] == "vigorous", DTS.index(r["dt"])))
     path = os.path.join(a.out, "stability.csv")
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys, restval="")
@@ -242,21 +260,6 @@ def main():
         for r in rows:
             w.writerow(r)
     print("wrote %s" % path)
-    for m in a.merge:  # the merged rows, numbers back as numbers
-        for r in csv.DictReader(open(m)):
-            for k in ("dt", "youngs", "speed"):
-                r[k] = float(r[k])
-            rows.append(r)
-            if r["solver"] not in solvers:
-                solvers.append(r["solver"])
-    rows.sort(key=lambda r: (SOLVERS.index(r["solver"]), NEEDLES.index(r["needle"]),
-                             YOUNGS.index(r["youngs"]), SPEEDS.index(r["speed"]),
-                             r["motion"] == "vigorous", DTS.index(r["dt"])))
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys, restval="")
-        w.writeheader()
-        for r in rows:
-            w.writerow(r)
     print("\n| solver | needle | %s |\n|---|---|%s" % (" | ".join(STATUSES), "---|" * len(STATUSES)))
     for s in solvers:
         for n in NEEDLES:
