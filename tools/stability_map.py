@@ -240,9 +240,10 @@ def main():
             "reason", "steps", "nan", "inverted", "unconverged", "lcp_unresolved_fraction",
             "min_dihedral_deg", "tip_error_mm", "median_step_ms", "finer_tip_mm",
             "finer_energy_rel", "events"]
+    measured = {(q["solver"], q["needle"]) for q in rows}
     for m in a.merge:  # the earlier rows (read before the csv is written: it may be one of them)
         for r in csv.DictReader(open(m)):
-            if any(r["solver"] == q["solver"] and r["needle"] == q["needle"] for q in rows):
+            if (r["solver"], r["needle"]) in measured:
                 continue  # measured again now
             for k in ("dt", "youngs", "speed"):
                 r[k] = float(r[k])
