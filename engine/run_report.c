@@ -167,6 +167,8 @@ static void report_solver(NsJson *j, NsRun *r)
     ns_json_number(j, q.max_dihedral_deg);
     ns_json_key(j, "remesh_repaired_nodes");
     ns_json_int(j, r->repaired);
+    ns_json_key(j, "tissue_energy_j"); /* kinetic + elastic, at the end */
+    ns_json_number(j, ns_tissue_energy(&r->tissue));
     ns_json_end_object(j);
 }
 

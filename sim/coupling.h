@@ -154,6 +154,9 @@ typedef struct NsCouplingStats {
      * left the tissue through its surface this step (not back through its entry); tip_returned:
      * a needle through the far side was drawn back in until its tip was at the exit again. */
     int bone_contact, bone_region, stalled, tip_exit, tip_returned;
+    /* remesh: a withdrawn needle entered the tissue again this step (a fresh skin entry where
+     * it crossed the surface, sim/coupling_reentry.c); reentry_first: its first node inside */
+    int reentered, reentry_first;
 } NsCouplingStats;
 
 typedef struct NsCoupled {

@@ -45,6 +45,14 @@ void coupled_known_forces(CoupledSystem *S);
  * the tip's node released from bone. */
 int coupled_cut_tip(NsCoupled *c, NsCouplingStats *st);
 void coupled_unpin_tip(NsCoupled *c);
+/* The last point inside the deformed tissue on the world segment xa (inside) -> xb (outside),
+ * as a material point u; returns its tet, or -1 when xa is not inside. */
+int coupled_world_exit_point(const NsMesh *M, const double xa[3], const double xb[3], int hint,
+                             double u[3]);
+/* coupling_reentry.c: a withdrawn needle whose tip is in the tissue again enters afresh where
+ * it crosses the surface (skin entry; path, states and tip reset). 0 (still outside, or not
+ * deep enough yet), 1 (entered: the caller cuts to the tip), -1 (c->error says why). */
+int coupled_reenter(NsCoupled *c, NsCouplingStats *st);
 /* coupling_reparam.c: the needle rebuilt on its tissue points (§3.4.2). */
 int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st);
 

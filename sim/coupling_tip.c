@@ -170,8 +170,8 @@ static double rigid_crossing(const NsMesh *M, const double a[3], const double b[
 /* The last point inside the deformed tissue on the world segment xa (inside) -> xb (outside),
  * by bisection, as a material point u and the tet holding it. Returns the tet, or -1 when xa is
  * not inside either. */
-static int world_exit_point(const NsMesh *M, const double xa[3], const double xb[3], int hint,
-                            double u[3])
+int coupled_world_exit_point(const NsMesh *M, const double xa[3], const double xb[3], int hint,
+                             double u[3])
 {
     double b[4], bm[4], q[3];
     int t = ns_mesh_locate_in(M, M->x, xa, hint, 1e-9, b);
@@ -265,10 +265,8 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
     int t = ns_mesh_locate_in(M, M->x, r->x + 3 * (r->nodes - 1), start, 1e-9, b);
     int retracting = c->state[r->nodes - 1] == NS_FRICTION_DYN_NEG;
     double *u_new = m->u_new;
-    if (t < 0 && !(retracting && p->count == 2)) {
-        if (retracting)
-            return -1; /* drawn back out of the tissue elsewhere than at the entry: not modelled */
-        t = world_exit_point(M, M->x + 3 * tipn, r->x + 3 * (r->nodes - 1), start, u_new);
+    if (t < 0 && !retracting) {
+        t = coupled_world_exit_point(M, M->x + 3 * tipn, r->x + 3 * (r->nodes - 1), start, u_new);
         if (t < 0)
             return -1;
         m->exiting = 1;
@@ -277,14 +275,19 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
     for (int k = 0; k < 4 && t >= 0 && !m->exiting; k++)
         for (int i = 0; i < 3; i++)
             u_new[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
-    if (!(retracting && p->count == 2))
+    /* Withdrawn: a retracting tip behind the entry node, or outside the tissue (a retracting
+     * needle goes back along its own track, so it left through its entry, in one step when the
+     * step draws it back further than its remaining depth). */
+    if (!retracting || (t >= 0 && p->count != 2))
         return 0;
-    const double *ue = M->u + 3 * p->node[0], *ut = M->u + 3 * tipn;
-    double along = 0.0;
-    for (int i = 0; i < 3; i++)
-        along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
-    if (t >= 0 && !(along <= 0.0))
-        return 0;
+    if (t >= 0) {
+        const double *ue = M->u + 3 * p->node[0], *ut = M->u + 3 * tipn;
+        double along = 0.0;
+        for (int i = 0; i < 3; i++)
+            along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
+        if (!(along <= 0.0))
+            return 0;
+    }
     /* Algorithm 2 should have undone every split but the one that made the tip's node (undoing
      * that one is the retraction's own last step). */
     st->exit_undone =
@@ -620,8 +623,20 @@ int coupled_cut_tip(NsCoupled *c, NsCouplingStats *st)
     int n = r->nodes, coupled = 0;
     for (int i = 0; i < n; i++)
         coupled |= c->ta[i] >= 0;
-    if (!coupled)
-        return 0; /* outside the tissue: nothing cuts */
+    if (!coupled && !(c->params.remesh && c->outside))
+        return 0;
+    if (!coupled) {
+        /* Withdrawn: nothing cuts until the needle is pushed in again, a fresh skin entry
+         * (coupling_reentry.c), whose tip node Algorithm 2 then takes to the needle's tip. */
+        int rc = coupled_reenter(c, st);
+        if (rc <= 0)
+            return rc;
+        rc = remesh_tip(c, st);
+        c->state[n - 1] = NS_FRICTION_STATIC; /* a fresh entry's states, all STATIC */
+        if (rc == 0 && !c->outside)
+            tip_dihedrals(c, st);
+        return rc;
+    }
     st->tip_slide = 0.0;
     if (c->params.remesh) {
         /* Through the far side (issue 32): drawn back until its tip is within a quarter of the
