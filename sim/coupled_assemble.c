@@ -1,7 +1,7 @@
 /* The coupled system of one step (Eq. 7-8, §3.3): built from the needle's and the tissue's
  * forces and Jacobians (ns_rod_begin_step, ns_tissue_begin_step), with the coupling nodes' local
  * frames, friction thresholds, constraint right-hand sides and the viscous friction, the
- * solvers' starting guess, and our bevel model's load on the tip (sim/coupling_internal.h). */
+ * solvers' starting guess. */
 #include "coupling_internal.h"
 
 #include <math.h>
@@ -73,70 +73,6 @@ static void add_tissue_point_block(NsBlockMatrix *A, int a, int b, double w, con
                 for (int k = 0; k < 9; k++)
                     blk[k] += s * ws[i] * ws[j] * B[k];
         }
-}
-
-/* Our bevel model (NS_BEVEL_FORCE): while the tip cuts (DYNAMIC+ in the last step), a lateral
- * force k_b tan(psi) along the tip frame's m2 on the needle's tip, and its reaction on the
- * tissue at the point a quarter of the last path edge ahead of the tip's node along the tip
- * tangent (barycentric shares of that tet's nodes other than the tip's own). The paper
- * displaces u_new instead (§3.5, Figure 7); docs/remeshing.md compares them. *f: the lateral
- * force [N] (0: none); *et / *er: the caller's external forces copied and added to, to be
- * freed (NULL when there is no force). Returns 0, or -1 (memory). */
-int coupled_bevel_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
-                       double **et, double **er)
-{
-    NsRod *r = c->rod;
-    NsMesh *M = &c->tissue->mesh;
-    int n = r->nodes;
-    *et = *er = NULL;
-    *f_out = 0.0;
-    if (!c->params.remesh || c->outside || r->params.tip != NS_TIP_BEVEL ||
-        c->params.bevel_model != NS_BEVEL_FORCE || c->ta[n - 1] < 0 || c->path.count < 2 ||
-        c->state[n - 1] != NS_FRICTION_DYN_POS)
-        return 0;
-    int tn = c->path.node[c->path.count - 1], prev = c->path.node[c->path.count - 2];
-    if (M->node_tets[tn].count == 0)
-        return 0;
-    double t[3], m1[3], m2[3], q[3], b[4], d[3];
-    ns_rod_tip_frame(r, t, m1, m2);
-    for (int i = 0; i < 3; i++)
-        d[i] = M->x[3 * tn + i] - M->x[3 * prev + i];
-    double h = 0.25 * norm3(d);
-    for (int i = 0; i < 3; i++)
-        q[i] = M->x[3 * tn + i] + h * t[i];
-    int te = ns_mesh_locate_in(M, M->x, q, M->node_tets[tn].items[0], 1e-9, b);
-    if (te < 0)
-        return 0; /* nothing ahead: the tip is at the surface */
-    int reg = M->tet_region[te];
-    double kb = reg >= 0 && reg < NS_COUPLING_MAX_REGIONS ? c->params.bevel_force[reg] : 0.0;
-    double f = kb * tan(r->params.bevel_angle), wsum = 0.0;
-    for (int a = 0; a < 4; a++) {
-        if (M->tet_node[4 * te + a] == tn)
-            b[a] = 0.0;
-        wsum += b[a];
-    }
-    if (!(f != 0.0) || !(wsum > 0.0))
-        return 0;
-    size_t nt = 3 * (size_t)M->node_slots, nr = 3 * (size_t)n;
-    *et = ns_arena_push_zero(&c->arena, nt * sizeof **et);
-    *er = ns_arena_push_zero(&c->arena, nr * sizeof **er);
-    if (!*et || !*er) {
-        ns_arena_pop(&c->arena, *er);
-        ns_arena_pop(&c->arena, *et);
-        *et = *er = NULL;
-        return -1;
-    }
-    if (ext_tissue)
-        memcpy(*et, ext_tissue, nt * sizeof **et);
-    if (ext_rod)
-        memcpy(*er, ext_rod, nr * sizeof **er);
-    for (int i = 0; i < 3; i++) {
-        (*er)[3 * (n - 1) + i] += f * m2[i];
-        for (int a = 0; a < 4; a++)
-            (*et)[3 * M->tet_node[4 * te + a] + i] -= f * m2[i] * b[a] / wsum;
-    }
-    *f_out = f;
-    return 0;
 }
 
 /* sum over the rows not fixed of x_i y_i */

@@ -46,6 +46,7 @@ NsCouplingParams ns_default_coupling_params(void)
     p.tip_block = 0;
     p.remesh_dihedral_floor = 12.0;
     p.bevel_model = NS_BEVEL_FORCE;
+    p.tip_load_radius = 5e-3; /* m: docs/needle.md, "Loads at the tip" */
     for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++) {
         p.bevel_force[k] = 0.5;      /* N: docs/remeshing.md (bevel steering) */
         p.bevel_curvature[k] = 10.0; /* 1/m: the force model's at 45 deg in the gel (ibid.) */
@@ -154,13 +155,14 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
         q->refresh_iterations < 0 || bad_bevel || (q->twist_friction & ~1) ||
+        !(q->tip_load_radius > 0.0 && isfinite(q->tip_load_radius)) ||
         !(q->remesh_dihedral_floor >= 0.0 && q->remesh_dihedral_floor <= 60.0) ||
         (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
                  "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper, "
                  "twist_friction 0 or 1, "
-                 "remesh_dihedral_floor in [0, 60] deg, "
+                 "remesh_dihedral_floor in [0, 60] deg, tip_load_radius > 0, "
                  "bevel model force, displacement or arc with finite bevel forces and "
                  "curvatures >= 0");
         ns_needle_path_free(path); /* taken over, even on failure */

@@ -64,8 +64,9 @@ int ns_coupled_solver_parse(const char *name);
  * at the tip (docs/remeshing.md compares the two). */
 typedef enum NsBevelModel {
     /* Ours, the default: while the tip cuts, the tissue at the bevel pushes it along the tip
-     * frame's m2 with k_b tan(psi), k_b = bevel_force[region]; the tissue just ahead of the tip
-     * takes the reaction. The force does not depend on the mesh. */
+     * frame's m2 with k_b tan(psi), k_b = bevel_force[region]; the tissue ahead of the tip
+     * takes the reaction, spread over a ball of radius tip_load_radius, so neither depends on
+     * the mesh. */
     NS_BEVEL_FORCE = 0,
     /* The paper's (§3.5): u_new is displaced by d tan(psi) along m2 in material space only.
      * The strain it leaves builds up at the tip's node to about (element size) tan(psi), so
@@ -112,6 +113,9 @@ typedef struct NsCouplingParams {
     double bevel_force[NS_COUPLING_MAX_REGIONS]; /* k_b by tissue region [N] (NS_BEVEL_FORCE) */
     /* k_c by tissue region: the cut's curvature at tan(psi) = 1 [1/m] (NS_BEVEL_ARC) */
     double bevel_curvature[NS_COUPLING_MAX_REGIONS];
+    /* the radius R of the ball ahead of the tip over which the tissue takes the bevel force's
+     * reaction (NS_BEVEL_FORCE; sim/coupled_tip_load.c, docs/needle.md) [m] */
+    double tip_load_radius;
 } NsCouplingParams;
 
 NsCouplingParams ns_default_coupling_params(void);

@@ -69,12 +69,13 @@ static int fail(Step *s, const char *msg)
     return -1;
 }
 
-/* §3.5, ours (NS_BEVEL_FORCE): the bevel's lateral load on the tip, with the caller's loads. */
+/* §3.5, ours (NS_BEVEL_FORCE): the bevel's lateral load on the tip, its reaction spread over the
+ * tissue ahead (sim/coupled_tip_load.c), with the caller's loads. */
 static int bevel_load(Step *s)
 {
-    if (coupled_bevel_load(s->c, s->ctl->ext_tissue, s->ctl->ext_rod, &s->st.bevel_force, &s->bev_t,
-                           &s->bev_r))
-        return fail(s, "the bevel force could not be applied");
+    if (coupled_tip_load(s->c, s->ctl->ext_tissue, s->ctl->ext_rod, &s->st.bevel_force, &s->bev_t,
+                         &s->bev_r))
+        return fail(s, "the tip's loads could not be applied");
     return 0;
 }
 

@@ -2,7 +2,7 @@
  * (sim/step.c, docs/coupling.md "One step").
  *
  *   ns_step(c, controls, dt, stats)
- *     bevel load (ours, §3.5)      coupled_bevel_load          NS_BEVEL_FORCE only
+ *     bevel load (ours, §3.5)      coupled_tip_load            NS_BEVEL_FORCE only
  *     1. needle forces, Jacobians  ns_rod_begin_step           §3.2    -> stats.needle_ms
  *        tissue forces, Jacobians  ns_tissue_begin_step        §3.2, §3.6.3 -> stats.tissue_ms
  *     2. coupled system            coupled_assemble            Eq. 7-8, viscous friction §3.3

@@ -3,13 +3,19 @@
 
 Runs the phantom (single bend) and brachytherapy scenarios over mesh resolution, time step,
 solver tolerance and lazy-Jacobian threshold with `needlesim run`, measures each run's median
-step time and its error against a converged reference run of the same scenario (finest mesh,
-smallest dt, tightest tolerance, Jacobians rebuilt every step): on the phantom the tip and the
-markers matched at equal tip depth (and the final tips), on brachytherapy the seeds; and
-writes docs/speed-accuracy.csv and, with gnuplot, docs/speed-accuracy.png (the Pareto front
-marked, the default settings circled).
+step time and its error against a reference of the same scenario: on the phantom, the
+Richardson-extrapolated tip path of a ladder of mesh refinements (tissue.refine 1, 2, 4 at the
+smallest dt, tightest tolerance, Jacobians rebuilt every step; the ladder's successive RMS
+differences and observed order are printed and written to docs/speed-accuracy-reference.csv),
+the markers against the ladder's finest run; on brachytherapy (whose template holes need the
+scenario's own mesh) the seeds against its tightest run (smallest dt and tolerance), not
+extrapolated. Each error is matched at equal tip depth (and the final tips). It writes
+docs/speed-accuracy.csv and, with gnuplot, docs/speed-accuracy.png: one panel per scenario and
+error metric, each point labelled with the setting it changes, the Pareto front drawn, the
+default settings circled, the reference named in the panel's title.
 
     python3 tools/speed_accuracy.py [--bin build/needlesim] [--out docs] [--only phantom]
+    python3 tools/speed_accuracy.py --chart-only   # redraw the chart from the CSV
 
 A benchmark, not a test: it takes about half an hour on the 2-core machine. Times are medians of
 each run's own steps; the machine is shared, so compare within one sweep only.
@@ -34,8 +40,9 @@ DEFAULT = {"tissue.refine": 1, "dt": 0.01, "solver.tolerance": 1e-8,
 SCENARIOS = {
     "phantom": {
         "file": "scenarios/phantom_single_bend.lua",
-        "reference": {"tissue.refine": 3, "dt": 0.005, "solver.tolerance": 1e-10,
-                      "solver.lazy_threshold": 0.0},
+        "reference": {"dt": 0.005, "solver.tolerance": 1e-10, "solver.lazy_threshold": 0.0},
+        # Richardson extrapolation over these tissue.refine levels (each halving h)
+        "ladder": [1, 2, 4],
         # one parameter at a time from the defaults, and a few cheap combinations
         "runs": [
             {},
@@ -163,6 +170,59 @@ def errors(run_traj, ref_traj):
     return max(tip, final), marker
 
 
+def richardson(trajs, levels, out_dir):
+    """The Richardson-extrapolated tip path of runs at successive halvings of the element size
+    (trajs, coarsest first), as a trajectory dict with the finest run's rows (its markers) and
+    its tip replaced by f_n + (f_n - f_(n-1)) / (2^p - 1) at equal depth, p the observed order
+    log2(d_(n-1) / d_n) of the RMS successive differences (clamped to [0.5, 4]). Prints the
+    differences and writes them to speed-accuracy-reference.csv."""
+    cols = triples(trajs[0]["head"])
+    paths = []
+    for tr in trajs:
+        _, pt = points(tr, cols)
+        k = progress(tr)
+        idx = [i for i in range(len(k)) if i == 0 or k[i] > k[i - 1]]
+        paths.append(([k[i] for i in idx], [pt["tip"][i] for i in idx]))
+    lo, hi = max(p[0][0] for p in paths), min(p[0][-1] for p in paths)
+    grid = [lo + (hi - lo) * i / 400 for i in range(401)]
+    samp = [[interp(k, p, g) for g in grid] for k, p in paths]
+
+    def rms(a, b):
+        return math.sqrt(sum(math.dist(x, y) ** 2 for x, y in zip(a, b)) / len(a))
+
+    diffs = [rms(samp[i], samp[i - 1]) for i in range(1, len(samp))]
+    p = math.log2(diffs[-2] / diffs[-1]) if len(diffs) >= 2 and diffs[-1] > 0 else 1.0
+    p = min(4.0, max(0.5, p))
+    ext = [tuple(f + (f - g) / (2 ** p - 1) for f, g in zip(pf, pg))
+           for pf, pg in zip(samp[-1], samp[-2])]
+    rows = [{"refine": levels[0], "rms_to_previous_mm": "", "order": ""}]
+    for i, d in enumerate(diffs):
+        o = math.log2(diffs[i - 1] / d) if i and d > 0 else ""
+        rows.append({"refine": levels[i + 1], "rms_to_previous_mm": 1e3 * d, "order": o})
+    rows.append({"refine": "extrapolated", "rms_to_previous_mm": 1e3 * rms(ext, samp[-1]),
+                 "order": p})
+    for r in rows:
+        print("  reference ladder: refine %s  RMS to previous %s mm  order %s" % (
+            r["refine"], r["rms_to_previous_mm"], r["order"]), flush=True)
+    with open(os.path.join(out_dir, "speed-accuracy-reference.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    # the finest run, its tip path replaced by the extrapolated one, resampled on the grid
+    fin = trajs[-1]
+    head = fin["head"]
+    ix, idp = head.index("tip_x_m"), head.index("depth_m")
+    base = [r for r in fin["rows"]]
+    rows_out = []
+    for g, q in zip(grid, ext):
+        j = min(range(len(base)), key=lambda i: abs(base[i][idp] - g))
+        r = list(base[j])
+        r[ix:ix + 3] = q
+        r[idp] = g
+        rows_out.append(r)
+    return {"report": None, "head": head, "rows": rows_out}
+
+
 def seed_errors(rep, ref):
     """Largest distance between a run's seeds and the reference's, seed by seed, where they lie
     at the end of the run (report seeds[].position_m) [m]; None if the counts differ."""
@@ -210,44 +270,57 @@ def write_fronts(rows):
     print("wrote %s" % path)
 
 
+PANELS = [  # (scenario, column, what the error is)
+    ("phantom", "tip_error_mm", "phantom: largest tip distance over the path [mm]"),
+    ("phantom", "marker_error_mm", "phantom: largest marker distance [mm]"),
+    ("brachytherapy", "tip_error_mm", "brachytherapy: largest seed distance [mm]"),
+]
+
+
 def chart(rows, out_dir):
+    """One panel per scenario and error metric (PANELS), each point labelled with the setting it
+    changes from the defaults, its Pareto front drawn, the default circled, the reference in the
+    panel's title."""
     if not shutil.which("gnuplot"):
         print("gnuplot not found (apt install gnuplot-nox): no chart", file=sys.stderr)
         return
     work = tempfile.mkdtemp(prefix="needlesim-chart.")  # gnuplot's input, removed after
-    data = os.path.join(work, "speed-accuracy.dat")
-    with open(data, "w") as f:
-        for i, sc in enumerate(sorted({r["scenario"] for r in rows})):
-            sel = [r for r in rows if r["scenario"] == sc]
-            f.write("# %s\n" % sc)
-            for r in sel:
-                f.write("%g %g %d %d \"%s\"\n" % (r["cost_ms_per_s"], max(r["tip_error_mm"], 1e-4),
-                                                  r["pareto"], r["label"] == "default", r["label"]))
-            f.write("\n\n")
-            front = sorted((r for r in sel if r["pareto"]), key=lambda r: r["cost_ms_per_s"])
-            f.write("# %s front\n" % sc)
-            for r in front:
-                f.write("%g %g\n" % (r["cost_ms_per_s"], max(r["tip_error_mm"], 1e-4)))
-            f.write("\n\n")
+    panels = [p for p in PANELS if any(r["scenario"] == p[0] for r in rows)]
     gp = os.path.join(work, "speed-accuracy.gp")
-    names = sorted({r["scenario"] for r in rows})
-    plots = []
-    for i, sc in enumerate(names):
-        plots.append("'%s' index %d using 1:2 with points pt 7 ps 1.2 lc %d title '%s runs'"
-                     % (data, 2 * i, i + 1, sc))
-        plots.append("'%s' index %d using 1:2 with lines lw 2 lc %d title '%s Pareto front'"
-                     % (data, 2 * i + 1, i + 1, sc))
-        plots.append("'%s' index %d using ($4 > 0 ? $1 : 1/0):2 with points pt 6 ps 3 lc rgb 'black' "
-                     "title '%s'" % (data, 2 * i, "default settings" if i == 0 else ""))
     with open(gp, "w") as f:
-        f.write("set terminal pngcairo size 1100,700 font 'DejaVu Sans,11'\n")
+        f.write("set terminal pngcairo size 1400,%d font 'DejaVu Sans,10'\n" % (430 * len(panels)))
         f.write("set output '%s'\n" % os.path.join(out_dir, "speed-accuracy.png"))
-        f.write("set termoption noenhanced\nset logscale xy\nset grid\nset key outside right\n")
-        f.write("set xlabel 'cost: wall time per simulated second [ms/s] (median step / dt)'\n")
-        f.write('set ylabel "tip error against the converged reference [mm]\\n'
-                '(phantom: the tip path; brachytherapy: the seeds)"\n')
-        f.write("set title 'needlesim: speed against accuracy (tools/speed_accuracy.py)'\n")
-        f.write("plot " + ", \\\n     ".join(plots) + "\n")
+        f.write("set termoption noenhanced\nset logscale xy\nset grid\nset key top right\n")
+        f.write("set multiplot layout %d,1 title 'needlesim: speed against accuracy "
+                "(tools/speed_accuracy.py)'\n" % len(panels))
+        for i, (sc, col, what) in enumerate(panels):
+            sel = [r for r in rows if r["scenario"] == sc]
+            data = os.path.join(work, "p%d.dat" % i)
+            with open(data, "w") as d:
+                for r in sel:
+                    d.write("%g %g %d \"%s\"\n" % (r["cost_ms_per_s"], max(float(r[col]), 1e-4),
+                                                   r["label"] == "default", r["label"]))
+                d.write("\n\n")
+                key = (lambda r: r["cost_ms_per_s"])
+                front = sorted((r for r in sel if r["pareto"] in (True, "True")), key=key)
+                for r in front:
+                    d.write("%g %g\n" % (r["cost_ms_per_s"], max(float(r["tip_error_mm"]), 1e-4)
+                                          if col == "tip_error_mm" else max(float(r[col]), 1e-4)))
+            ref = sel[0].get("reference") or "not recorded"
+            f.write("set title \"%s\\nreference: %s\"\n" % (what, ref.replace('"', "'")))
+            f.write("set xlabel 'cost: wall time per simulated second [ms/s] (median step / dt)'\n")
+            f.write("set ylabel '%s'\n" % what.split(": ", 1)[1])
+            plots = ["'%s' index 0 using 1:2 with points pt 7 ps 1.2 lc 1 title 'a run (label: the "
+                     "settings changed from the defaults)'" % data,
+                     "'%s' index 0 using 1:2:4 with labels offset 0.8,0.6 left font ',8' notitle"
+                     % data,
+                     "'%s' index 0 using ($3 > 0 ? $1 : 1/0):2 with points pt 6 ps 3 "
+                     "lc rgb 'black' title 'default settings'" % data]
+            if col == "tip_error_mm":
+                plots.append("'%s' index 1 using 1:2 with lines lw 2 lc 2 "
+                             "title 'Pareto front (cost, this error)'" % data)
+            f.write("plot " + ", \\\n     ".join(plots) + "\n")
+        f.write("unset multiplot\n")
     subprocess.run(["gnuplot", gp], check=True)
     shutil.rmtree(work, ignore_errors=True)
     print("wrote %s" % os.path.join(out_dir, "speed-accuracy.png"))
@@ -258,7 +331,16 @@ def main():
     ap.add_argument("--bin", default=os.path.join(ROOT, "build", "needlesim"))
     ap.add_argument("--out", default=os.path.join(ROOT, "docs"))
     ap.add_argument("--only", choices=sorted(SCENARIOS))
+    ap.add_argument("--chart-only", action="store_true",
+                    help="redraw the chart from the CSV, running nothing")
     a = ap.parse_args()
+    if a.chart_only:
+        rows = [r for r in csv.DictReader(open(os.path.join(a.out, "speed-accuracy.csv")))
+                if not r["failed"]]
+        for r in rows:
+            r["cost_ms_per_s"] = float(r["cost_ms_per_s"])
+        chart(rows, a.out)
+        return
     tmp = tempfile.mkdtemp(prefix="needlesim-sweep.")
     rows = []
     try:
@@ -266,14 +348,27 @@ def main():
             if a.only and name != a.only:
                 continue
             print("%s: reference %s ..." % (name, label(spec["reference"])), flush=True)
-            ref, err = run(a.bin, spec["file"], spec["reference"], tmp)
-            if not ref:
-                sys.exit("%s: the reference run failed: %s" % (name, err))
+            ladder = []
+            for lv in spec.get("ladder", [None]):
+                sets = dict(spec["reference"])
+                if lv is not None:
+                    sets["tissue.refine"] = lv
+                ref, err = run(a.bin, spec["file"], sets, tmp)
+                if not ref:
+                    sys.exit("%s: the reference run %s failed: %s" % (name, label(sets), err))
+                ladder.append(ref)
+            if len(ladder) >= 3:
+                ref = richardson(ladder, spec["ladder"], a.out)
+                ref_name = "Richardson-extrapolated tip path, refine %s, %s" % (
+                    "/".join(str(x) for x in spec["ladder"]), label(spec["reference"]))
+            else:
+                ref = ladder[-1]
+                ref_name = "tightest run (%s), not extrapolated" % label(spec["reference"])
             for sets in spec["runs"]:
                 full = dict(DEFAULT)
                 full.update(sets)
                 got, err = run(a.bin, spec["file"], sets, tmp)
-                row = {"scenario": name, "label": label(sets),
+                row = {"scenario": name, "label": label(sets), "reference": ref_name,
                        "refine": full["tissue.refine"], "dt": full["dt"],
                        "tolerance": full["solver.tolerance"],
                        "lazy_threshold": full["solver.lazy_threshold"]}
@@ -289,6 +384,8 @@ def main():
                     tip, marker = seed_errors(rep, ref["report"]), 0.0
                 else:
                     tip, marker = errors(got, ref)
+                    if len(ladder) >= 3:  # markers against the finest run of the ladder
+                        marker = errors(got, ladder[-1])[1]
                 if tip is None or not math.isfinite(tip):
                     err = "%d seeds, the reference %d" % (len(rep["seeds"]),
                                                           len(ref["report"]["seeds"]))
@@ -331,7 +428,7 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     keys = ["scenario", "label", "refine", "tets", "dt", "tolerance", "lazy_threshold", "steps",
             "median_step_ms", "cost_ms_per_s", "tip_error_mm", "marker_error_mm", "pareto",
-            "failed"]
+            "reference", "failed"]
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()

@@ -1,0 +1,126 @@
+/* Our bevel model's load (NS_BEVEL_FORCE, §3.5; issue 35, docs/needle.md, "The bevel force's
+ * reaction"): while the needle is pushed in (v_insert > 0) and its tip is not sliding back, the
+ * bevel face presses on the tissue whether the tip cuts this step or sticks while the load
+ * builds (an on/off force by the last step's state, DYNAMIC+ only, made the mean force depend on
+ * dt through the stick-slip's duty cycle: 96 % of steps at dt 10 ms, 78 % at 5 ms), the lateral
+ * force k_b tan(psi) on the needle's tip along the tip frame's m2, and its reaction on the tissue
+ * ahead of the tip, which the tissue takes over a ball of physical size rather than at one point. A
+ * force put at one point of a 3D mesh strains the elements around it as F / (E h^2) and moves them
+ * by about F / (E h), without limit as the element size h shrinks; the cut follows that strain, so
+ * a tip path steered by it does not converge under mesh refinement (it did not: docs/needle.md).
+ * Here the reaction is a body force of fixed shape: the density (1 - r^2/R^2)^2 over the ball of
+ * radius R = tip_load_radius just ahead of the tip (centred R ahead along the tip tangent, touching
+ * the tip), integrated against the elements' shape functions at a lattice of points fixed relative
+ * to the tip (spacing R/4, 257 points): the nodes' consistent loads, which tend to the continuum's
+ * as the mesh is refined and no longer depend on it once the elements are finer than the ball. The
+ * tip's own node takes no share (it is the needle's: a share there would push the needle back, not
+ * the tissue ahead); the shares of points outside the tissue are dropped and the rest renormalized.
+ */
+#include "coupling_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define LATTICE_N 4 /* lattice points per radius */
+
+static double norm3(const double *a)
+{
+    return sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+}
+
+/* Adds the force f (3 components) to et, spread over the ball ahead of the tip (see above).
+ * Returns 1, or 0 when no point of the ball is in the tissue (nothing added). */
+static int spread_ahead(const NsCoupled *c, const double tip[3], const double t[3], int tipn,
+                        const double f[3], double *et)
+{
+    const NsMesh *M = &c->tissue->mesh;
+    double R = c->params.tip_load_radius, s = R / LATTICE_N, ctr[3];
+    for (int i = 0; i < 3; i++)
+        ctr[i] = tip[i] + R * t[i];
+    /* First pass: the total weight of the points inside the tissue, off the tip's node. */
+    int hint = M->node_tets[tipn].count ? M->node_tets[tipn].items[0] : -1;
+    double wsum = 0.0;
+    for (int pass = 0; pass < 2; pass++) {
+        if (pass == 1 && !(wsum > 0.0))
+            return 0;
+        int h = hint;
+        for (int i = -LATTICE_N; i <= LATTICE_N; i++)
+            for (int j = -LATTICE_N; j <= LATTICE_N; j++)
+                for (int k = -LATTICE_N; k <= LATTICE_N; k++) {
+                    double r2 = (double)(i * i + j * j + k * k) / (LATTICE_N * LATTICE_N);
+                    if (!(r2 < 1.0))
+                        continue;
+                    double rho = (1.0 - r2) * (1.0 - r2),
+                           q[3] = {ctr[0] + s * i, ctr[1] + s * j, ctr[2] + s * k};
+                    double b[4];
+                    int te = ns_mesh_locate_in(M, M->x, q, h, 1e-9, b);
+                    if (te < 0)
+                        continue;
+                    h = te;
+                    const int *tn = M->tet_node + 4 * te;
+                    for (int a = 0; a < 4; a++) {
+                        if (tn[a] == tipn)
+                            continue;
+                        if (pass == 0) {
+                            wsum += rho * b[a];
+                            continue;
+                        }
+                        double w = rho * b[a] / wsum;
+                        for (int d = 0; d < 3; d++)
+                            et[3 * tn[a] + d] += w * f[d];
+                    }
+                }
+    }
+    return 1;
+}
+
+int coupled_tip_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
+                     double **et, double **er)
+{
+    NsRod *r = c->rod;
+    NsMesh *M = &c->tissue->mesh;
+    int n = r->nodes;
+    *et = *er = NULL;
+    *f_out = 0.0;
+    if (!c->params.remesh || c->outside || c->path.through || r->params.tip != NS_TIP_BEVEL ||
+        c->params.bevel_model != NS_BEVEL_FORCE || c->ta[n - 1] < 0 || c->path.count < 2 ||
+        c->state[n - 1] == NS_FRICTION_DYN_NEG || !(r->v_insert > 0.0))
+        return 0;
+    int tn = c->path.node[c->path.count - 1];
+    if (M->node_tets[tn].count == 0)
+        return 0;
+    double t[3], m1[3], m2[3];
+    ns_rod_tip_frame(r, t, m1, m2);
+    double tl = norm3(t);
+    if (!(tl > 0.0))
+        return 0;
+    for (int i = 0; i < 3; i++)
+        t[i] /= tl;
+    /* k_b by the region the tip is in. */
+    int reg = M->tet_region[M->node_tets[tn].items[0]];
+    double kb = reg >= 0 && reg < NS_COUPLING_MAX_REGIONS ? c->params.bevel_force[reg] : 0.0;
+    double fb = kb * tan(r->params.bevel_angle);
+    if (!(fb != 0.0))
+        return 0;
+    size_t nt = 3 * (size_t)M->node_slots, nr = 3 * (size_t)n;
+    *et = ns_arena_push_zero(&c->arena, nt * sizeof **et);
+    *er = ns_arena_push_zero(&c->arena, nr * sizeof **er);
+    if (!*et || !*er) {
+        ns_arena_pop(&c->arena, *er);
+        ns_arena_pop(&c->arena, *et);
+        *et = *er = NULL;
+        return -1;
+    }
+    if (ext_tissue)
+        memcpy(*et, ext_tissue, nt * sizeof **et);
+    if (ext_rod)
+        memcpy(*er, ext_rod, nr * sizeof **er);
+    double f[3] = {-fb * m2[0], -fb * m2[1], -fb * m2[2]};
+    if (!spread_ahead(c, r->x + 3 * (n - 1), t, tn, f, *et))
+        return 0; /* nothing ahead in the tissue: the tip is at the surface (both left as given) */
+    for (int i = 0; i < 3; i++)
+        (*er)[3 * (n - 1) + i] += fb * m2[i];
+    *f_out = fb;
+    return 0;
+}
