@@ -20,8 +20,9 @@ static double norm3(const double *a)
     return sqrt(dot3(a, a));
 }
 
-/* Outside the tissue: nothing is coupled. A withdrawn needle pushed back in would pass through
- * the tissue unseen: re-entry is not handled yet, so it is an error. Free of the tissue, the rod
+/* Outside the tissue: nothing is coupled. A withdrawn needle pushed back in (its tip in the tissue
+ * deeper than it was as it left) would pass through the tissue unseen: re-entry is not handled
+ * yet, so it is an error. Free of the tissue, the rod
  * still splits and merges its edges: a retraction shortens the edge at the sleeve, which must
  * merge with the next to go on. */
 static int reparameterize_free(NsCoupled *c, NsCouplingStats *st)
@@ -30,7 +31,13 @@ static int reparameterize_free(NsCoupled *c, NsCouplingStats *st)
     const NsMesh *M = &c->tissue->mesh;
     if (!c->outside)
         return 0;
-    if (ns_mesh_locate_in(M, M->x, r->x + 3 * (r->nodes - 1), c->remesh_hint, 1e-9, NULL) >= 0) {
+    /* Inside the tissue, deeper along the track than the tip was as it left (it leaves a
+     * little way inside: coupling_tip.c, EXIT_MARGIN): pushed back in. */
+    const double *tip = r->x + 3 * (r->nodes - 1);
+    double depth = 0.0;
+    for (int i = 0; i < 3; i++)
+        depth += (tip[i] - c->exit_x[i]) * c->exit_dir[i];
+    if (depth > c->exit_depth && ns_mesh_locate_in(M, M->x, tip, c->remesh_hint, 1e-9, NULL) >= 0) {
         snprintf(c->error, sizeof c->error,
                  "the needle went back into the tissue after leaving it (re-entry is not "
                  "modelled yet)");

@@ -43,6 +43,10 @@ static void tip_dihedrals(const NsCoupled *c, NsCouplingStats *st)
     }
 }
 
+/* A needle drawn back leaves the tissue once its tip is within this fraction of the entry
+ * node's mean edge from it (tip_target). */
+#define EXIT_MARGIN 0.25
+
 /* A fresh heading for the arc model: the cut's direction at the tip in material space, the
  * chord from the tip's node back along the path to the first node at least the mean length of
  * the tip node's edges away (or the path's start). The world tangent of the rod's last edge is
@@ -278,12 +282,32 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
             u_new[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
     if (!(retracting && p->count == 2))
         return 0;
-    const double *ue = M->u + 3 * p->node[0], *ut = M->u + 3 * tipn;
-    double along = 0.0;
-    for (int i = 0; i < 3; i++)
+    /* Ours (issue 35): the needle leaves once its tip is drawn back to within EXIT_MARGIN of the
+     * entry node's mean edge from it, along the track, not only once it is behind it:
+     * the last node the tip drags towards the entry node makes tets with it and its star's far
+     * edges whose dihedral angles shrink with the distance between the two (2.8 deg at a
+     * twelfth of an element in remesh-cycles), the exit's counterpart of the skin entry's short
+     * edge (remesh_entry.c). The tip, then that little way inside, is free. */
+    int en = p->node[0];
+    const double *ue = M->u + 3 * en, *ut = M->u + 3 * tipn;
+    double along = 0.0, track = 0.0;
+    for (int i = 0; i < 3; i++) {
         along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
-    if (t >= 0 && !(along <= 0.0))
+        track += (ut[i] - ue[i]) * (ut[i] - ue[i]);
+    }
+    along = track > 0.0 ? along / sqrt(track) : 0.0; /* the tip's depth along the track [m] */
+    if (t >= 0 && !(along <= EXIT_MARGIN * node_edge_mean(M, en)))
         return 0;
+    /* Where the needle leaves, for the check that it is not pushed back in (re-entry). */
+    double dx[3], dl = 0.0;
+    for (int i = 0; i < 3; i++) {
+        dx[i] = M->x[3 * tipn + i] - M->x[3 * en + i];
+        dl += dx[i] * dx[i];
+    }
+    dl = sqrt(dl);
+    for (int i = 0; i < 3; i++)
+        c->exit_dir[i] = dl > 0.0 ? dx[i] / dl : 0.0;
+    c->exit_depth = fmax(along, 0.0);
     /* Algorithm 2 should have undone every split but the one that made the tip's node (undoing
      * that one is the retraction's own last step). */
     st->exit_undone =
@@ -295,6 +319,7 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
             return -1;
         }
     ns_remesh_release_all(M, &c->remesh);
+    memcpy(c->exit_x, M->x + 3 * en, sizeof c->exit_x);
     c->outside = 1;
     c->heading_valid = 0;
     st->exited = 1;
