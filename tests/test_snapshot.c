@@ -217,7 +217,7 @@ static int restored_steps_to(const NsWorldSnapshot *s, int m, double v, double d
 }
 
 /* In 32 steps of 0.2 mm the tip has split the tissue (the split on the stack; the skin entry's
- * tip node starts 1.5 mm in and snaps its way on before it needs one); the next 30
+ * tip node starts about half an element in and snaps its way on before it needs one); the next 30
  * undo it, split again and snap. */
 enum { N_IN = 32, M_MORE = 30 };
 #define SPEED 0.02
