@@ -307,7 +307,7 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
     dl = sqrt(dl);
     for (int i = 0; i < 3; i++)
         c->exit_dir[i] = dl > 0.0 ? dx[i] / dl : 0.0;
-    c->exit_depth = fmax(along, 0.0);
+    c->exit_depth = t >= 0 ? fmax(along, 0.0) : 0.0; /* (t < 0: the tip is already out) */
     /* Algorithm 2 should have undone every split but the one that made the tip's node (undoing
      * that one is the retraction's own last step). */
     st->exit_undone =
