@@ -26,14 +26,18 @@
 #include "run.h"
 #include "step.h"
 
-const char *const ns_run_event_names[2] = {"bone_contact", "tip_exit"};
+const char *const ns_run_event_names[3] = {"bone_contact", "tip_exit", "needle_reentry"};
 
 /* Records what the step's statistics say happened at the tip (a bone contact's first step, an
- * exit through the surface), at the step's end time. Returns 0, or -1 (memory). */
+ * exit through the surface, a withdrawn needle's re-entry), at the step's end time. Returns 0,
+ * or -1 (memory). */
 int ns_run_record_events(NsRun *r, const NsCouplingStats *st, double t, const double tip[3])
 {
-    for (int type = 0; type < 2; type++) {
-        if (type == EVENT_BONE_CONTACT ? st->bone_contact != 1 : !st->tip_exit)
+    for (int type = 0; type < 3; type++) {
+        int happened = type == EVENT_BONE_CONTACT ? st->bone_contact == 1
+                       : type == EVENT_TIP_EXIT   ? st->tip_exit
+                                                  : st->reentered;
+        if (!happened)
             continue;
         if (r->event_n == r->event_cap) {
             int cap = r->event_cap ? 2 * r->event_cap : 8;
@@ -171,11 +175,11 @@ int ns_run_place_needle(NsRun *r, const char *what, char *err, int err_sz)
         cp.tau_check = cp.tau_sol;
     for (int k = 0; k < sc->region_count; k++)
         cp.cut_force[k] = sc->regions[k].material.cut_force;
-    if (sp->steer_arc) { /* needle.steering = "arc" */
-        cp.bevel_model = NS_BEVEL_ARC;
+    cp.twist_friction = sp->twist_friction;      /* needle.twist_friction */
+    cp.bevel_model = (NsBevelModel)sp->steering; /* needle.steering */
+    if (sp->steering == NS_BEVEL_ARC)
         for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
             cp.bevel_curvature[k] = sp->arc_curvature;
-    }
     /* One friction per unit length for the whole needle: that of the region at the entry. */
     int t0 = M->node_tets[nodes[0]].items[0];
     cp.f_perlen = sc->regions[M->tet_region[t0]].material.friction;
@@ -496,10 +500,10 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
                    "failed: %s (NaN %d, inverted %d, unconverged %d)",
                    r->sc.path, r->steps, t, 1e3 * tp[0], 1e3 * tp[1], 1e3 * tp[2],
                    1e3 * ns_run_depth(r),
-                   outside         ? "the needle tip left the tissue other than through its "
-                                     "entry or out through its surface"
-                   : r->c.error[0] ? r->c.error
-                                   : "the coupled step did not produce a valid state",
+                   r->c.error[0] ? r->c.error
+                   : outside     ? "the needle tip left the tissue other than through its "
+                                   "entry or out through its surface"
+                                 : "the coupled step did not produce a valid state",
                    st.nan_count, st.inverted, st.unconverged);
         return -1;
     }
@@ -513,7 +517,7 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
-    r->exited |= st.exited;
+    r->exited = st.reentered ? 0 : r->exited | st.exited; /* out, until it enters again */
     r->inverted += st.inverted;
     r->repaired += st.remesh_repaired;
     r->unconverged += st.unconverged;

@@ -87,7 +87,8 @@ typedef struct NsRun {
         int target, hint;
     } * seeds;
     int seed_n, seed_cap;
-    /* physical outcomes (issue 32): the tip stopped at bone, the tip out through the surface */
+    /* physical outcomes (issue 32): the tip stopped at bone, the tip out through the surface, a
+     * withdrawn needle in again (re-entry) */
     struct Event {
         double t, x[3];
         int type, region; /* EVENT_*; bone: the region touched */
@@ -150,7 +151,7 @@ typedef struct NsRun {
     void *report_ctx;
 } NsRun;
 
-enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT };
+enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT, EVENT_REENTRY };
 
 typedef struct NsTargetResult {
     double x[3], error_mm, score;
@@ -175,7 +176,7 @@ static inline double ns_run_dot3(const double *a, const double *b)
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
-extern const char *const ns_run_event_names[2];
+extern const char *const ns_run_event_names[3];
 
 /* engine/run.c: the run: building, the loop, seeds, obstacles, events */
 int ns_run_record_events(NsRun *r, const NsCouplingStats *st, double t, const double tip[3]);

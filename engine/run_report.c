@@ -173,6 +173,8 @@ static void report_solver(NsJson *j, NsRun *r)
     ns_json_number(j, r->dw.min_rest_deg);
     ns_json_key(j, "min_dihedral_deg_any_step_deformed");
     ns_json_number(j, r->dw.min_world_deg);
+    ns_json_key(j, "tissue_energy_j"); /* kinetic + elastic, at the end */
+    ns_json_number(j, ns_tissue_energy(&r->tissue));
     ns_json_end_object(j);
 }
 

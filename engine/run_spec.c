@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "coupling.h"
 #include "err.h"
 #include "mesh.h"
 #include "names.h"
@@ -337,6 +338,9 @@ static int check_spec(const NsScenario *sc, const NsRunSpec *s, char *err, int e
                    "needle.youngs must be in [1e6, 1e13] Pa and density in [10, 1e5] kg/m^3 "
                    "(got %g and %g)",
                    s->youngs, s->density);
+    if (s->steering < 0)
+        return bad(err, err_sz, w,
+                   "needle.steering must be \"force\", \"displacement\" or \"arc\"");
     if (!in_range(s->bevel_deg, 1.0, 89.0) || !in_range(s->arc_curvature, 0.0, 1000.0))
         return bad(err, err_sz, w,
                    "needle.bevel_deg must be in [1, 89] and curvature in [0, 1000] 1/m (got %g "
@@ -449,9 +453,16 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         free(tip);
         spec->bevel_deg = num_field(L, ni, "bevel_deg", 30.0);
         char *steer = str_field(L, ni, "steering", "force");
-        spec->steer_arc = steer && strcmp(steer, "arc") == 0;
+        /* ns.needle has checked the name; a raw table that names none of the three fails
+         * here rather than steering silently with the default */
+        spec->steering = !steer                               ? -1
+                         : strcmp(steer, "force") == 0        ? NS_BEVEL_FORCE
+                         : strcmp(steer, "displacement") == 0 ? NS_BEVEL_DISPLACEMENT
+                         : strcmp(steer, "arc") == 0          ? NS_BEVEL_ARC
+                                                              : -1;
         free(steer);
         spec->arc_curvature = num_field(L, ni, "curvature", 10.0);
+        spec->twist_friction = bool_field(L, ni, "twist_friction", true);
     } else {
         spec->needle_kind = malloc(6);
         if (spec->needle_kind)
@@ -462,8 +473,9 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         spec->density = 8000.0;
         spec->bevel = false;
         spec->bevel_deg = 30.0;
-        spec->steer_arc = false;
+        spec->steering = NS_BEVEL_FORCE;
         spec->arc_curvature = 10.0;
+        spec->twist_friction = true;
     }
     lua_pop(L, 1);
     if (raw_field(L, si, "entry") == LUA_TTABLE) {

@@ -45,8 +45,9 @@ typedef struct NsRunSpec {
     double diameter, inner_diameter, youngs, density; /* SI */
     bool bevel;
     double bevel_deg;
-    bool steer_arc;       /* steering = "arc": the nonholonomic model (else the bevel force) */
+    int steering;         /* steering = "force" | "displacement" | "arc": an NsBevelModel */
     double arc_curvature; /* its curvature at tan(psi) = 1 [1/m] */
+    bool twist_friction;  /* torsional friction with the tissue (sim/twist_friction.h) */
     /* entry = {point, direction} (direction of unit length) */
     double entry_point[3], entry_dir[3];
     bool has_bevel_toward;

@@ -35,6 +35,7 @@ typedef struct SceneDef {
     double eta;   /* viscous friction per length [N s/m^2] */
     double gamma; /* Newmark gamma of tissue and needle; beta = (gamma + 1/2)^2 / 4 */
     int remesh;   /* remesh at the tip (the path then ends at the tip node) */
+    int flexible; /* 1: the solid nitinol needle of 0.83 mm (Webster et al. 2006) */
 } SceneDef;
 
 typedef struct Scene {
@@ -53,7 +54,7 @@ typedef struct Scene {
 static SceneDef default_scene(void)
 {
     SceneDef d = {0.024, 0.012, 12, 6, 0.0, 0.0, 2, 6, -1, 4, 20.0, {0.0, 0.0}, NS_COUPLED_SCHUR,
-                  0.0,   0.55,  0};
+                  0.0,   0.55,  0,  0};
     return d;
 }
 
@@ -128,6 +129,12 @@ static int scene_make(Scene *s, const SceneDef *d, NsValidateResult *r)
     NsRodParams rp = ns_default_rod_params();
     rp.gamma = tp.gamma;
     rp.beta = tp.beta;
+    if (d->flexible) {
+        rp.material.youngs = 50e9;
+        rp.material.outer_diameter = 0.83e-3;
+        rp.material.inner_diameter = 0.0;
+        rp.material.density = 6450.0;
+    }
     int rc = ns_rod_init(&s->rod, x, n, d1, d->held, &rp, err, sizeof err);
     free(x);
     if (rc) {
@@ -486,6 +493,108 @@ static int puncture(NsValidateResult *r)
     return rc;
 }
 
+/* The twist of edge j about its tangent from its material frame's m1 at the start (m0, per
+ * edge), measured on the directors [rad]. */
+static double edge_turn(const NsRod *rod, int j, const double *m0)
+{
+    double m[3], t[3];
+    ns_rod_material_frame(rod, j, t, m, NULL);
+    const double *b = m0 + 3 * j;
+    double c[3] = {b[1] * m[2] - b[2] * m[1], b[2] * m[0] - b[0] * m[2], b[0] * m[1] - b[1] * m[0]};
+    return atan2(c[0] * t[0] + c[1] * t[1] + c[2] * t[2], b[0] * m[0] + b[1] * m[1] + b[2] * m[2]);
+}
+
+/* Torsional friction: the base of a needle inserted L into the block turns by 3 dtheta and back.
+ * While the whole inserted length slips, the torque a distance u from the tip is tau_f u, so the
+ * tip lags the base by dtheta = tau_f L (L / 2 + L_out) / GJ (docs/validation.md), tau_f =
+ * f_perlen d_o / 2; at a reversal the tip stays until the base has turned back 2 dtheta. */
+static int twist_friction(NsValidateResult *r)
+{
+    snprintf(r->metric, sizeof r->metric, "steady lag of the tip behind the base [rad]");
+    SceneDef d = default_scene();
+    d.len = 0.06;
+    d.width = 0.016;
+    d.nx = 15;
+    d.nyz = 4;
+    d.out_edges = 5;
+    d.tip_node = 15;
+    d.f_perlen = 20.0;
+    d.flexible = 1;
+    Scene s;
+    if (scene_make(&s, &d, r)) {
+        scene_free(&s);
+        return -1;
+    }
+    NsRod *rod = &s.rod;
+    int ne = rod->nodes - 1, tipe = ne - 1;
+    /* The closed form, from the scene's own numbers. */
+    double h = d.len / d.nx, L = d.len, L_out = d.out_edges * h, dia = 0.83e-3;
+    double GJ = 50e9 / (2.0 * (1.0 + 0.3)) * M_PI * dia * dia * dia * dia / 32.0;
+    double tau_f = d.f_perlen * 0.5 * dia, lag = tau_f * L * (0.5 * L + L_out) / GJ;
+    double *m0 = malloc(3 * (size_t)rod->nodes * sizeof *m0);
+    if (!m0) {
+        scene_free(&s);
+        return fail(r, "out of memory");
+    }
+    for (int j = 0; j < ne; j++)
+        ns_rod_material_frame(rod, j, NULL, m0 + 3 * j, NULL);
+    int steps = 300;
+    double dt = 1e-3, rate = 3.0 * lag / (steps * dt);
+    double start = -1.0, base_max = 0.0, tip_max = 0.0, back = -1.0, still = 0.0;
+    double lag_fwd = 0.0, lag_rev = 0.0;
+    int rc = 0;
+    for (int k = 0; k < 2 * steps && rc == 0; k++) {
+        rod->twist_rate = k < steps ? rate : -rate;
+        NsCouplingStats st;
+        if (ns_coupled_step(&s.cpl, dt, NULL, NULL, &st)) {
+            rc = fail(r, "coupled step failed");
+            break;
+        }
+        double base = edge_turn(rod, 0, m0), tip = edge_turn(rod, tipe, m0);
+        /* Once the tip moves it follows the base one for one: where it first moved, the base had
+         * turned by (its turn then) - (the tip's) before the tip took up. */
+        if (k < steps) {
+            if (start < 0.0 && tip > 1e-9 * lag)
+                start = base - tip;
+            if (start < 0.0)
+                still = fmax(still, fabs(tip));
+            base_max = base;
+            tip_max = tip;
+            lag_fwd = base - tip;
+        } else {
+            if (back < 0.0 && tip < tip_max - 1e-9 * lag)
+                back = (base_max - base) - (tip_max - tip);
+            if (back < 0.0)
+                still = fmax(still, fabs(tip - tip_max));
+            lag_rev = tip - base;
+        }
+    }
+    free(m0);
+    scene_free(&s);
+    if (rc)
+        return rc;
+    r->value = lag_fwd;
+    r->reference = lag;
+    r->error = fabs(lag_fwd - lag) / lag;
+    r->tolerance = 0.01;
+    double e_start = fabs(start - lag) / lag, e_back = fabs(back - 2.0 * lag) / (2.0 * lag);
+    double e_rev = fabs(lag_rev - lag) / lag;
+    ns_validate_detail(r,
+                       "nitinol needle (0.83 mm, GJ %.4e N m^2) %.0f mm into a gel block, %.0f mm "
+                       "free, f_perlen %.0f N/m, tau_f = f_perlen d_o / 2 = %.3e N m/m; base "
+                       "turned %.4f rad in %d steps of 1 ms and back: tip took up after %.6f rad "
+                       "(err %.1e), steady lag %.6f against tau_f L (L/2 + L_out) / GJ = %.6f "
+                       "rad (%.2f deg); after the reversal it stayed until the base had turned "
+                       "back %.6f against 2 dtheta %.6f (err %.1e), then lagged %.6f (err %.1e); "
+                       "largest tip turn while stuck %.1e rad (bars 1%%, 1e-6 dtheta)",
+                       GJ, 1e3 * L, 1e3 * L_out, d.f_perlen, tau_f, 3.0 * lag, steps, start,
+                       e_start, lag_fwd, lag, lag * 180.0 / M_PI, back, 2.0 * lag, e_back, lag_rev,
+                       e_rev, still);
+    r->pass = r->error <= r->tolerance && start >= 0.0 && back >= 0.0 && e_start <= 0.01 &&
+              e_back <= 0.01 && e_rev <= 0.01 && still <= 1e-6 * lag;
+    return 0;
+}
+
 static int solver_agreement(NsValidateResult *r)
 {
     /* The puncture scene, the needle driven in at 10 mm/s for 0.8 s (through the membrane) and
@@ -561,6 +670,8 @@ const NsValidateCase ns_validate_coupling_cases[] = {
      friction_reversal},
     {"puncture", "membrane crossed: force peaks at f_cut(membrane) + friction, then drops",
      puncture},
+    {"twist-friction", "base of an inserted needle turned and back: lag tau_f L (L/2 + L_out) / GJ",
+     twist_friction},
     {"solver-agreement", "schur and paper solvers: tips within 0.05 mm, states >= 99% alike",
      solver_agreement},
 };

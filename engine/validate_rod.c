@@ -1,7 +1,8 @@
 /* Validation cases for the needle rod (sim/rod.c, sim/reparam.c; docs/validation.md):
  * small- and large-deflection cantilevers against beam theory and the elastica, Euler buckling,
- * twist propagation from the base, length preservation, and reparameterization. Every case uses
- * the default needle: stainless steel, 18 gauge (1.27 mm outer, 0.84 mm inner diameter). */
+ * twist propagation from the base, an end torque against T L / GJ, length preservation, and
+ * reparameterization. Every case but rod-torsion (the flexible nitinol needle) uses the default
+ * needle: stainless steel, 18 gauge (1.27 mm outer, 0.84 mm inner diameter). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -342,6 +343,81 @@ static int rod_twist(NsValidateResult *r)
     return 0;
 }
 
+/* The twist of edge j about its tangent from edge 0's material frame (the sleeve's), measured
+ * on the directors: atan2((b x m) . t, b . m) with b, m the two m1 [rad]. */
+static double frame_twist(const NsRod *rod, int j)
+{
+    double b[3], m[3], t[3];
+    ns_rod_material_frame(rod, 0, NULL, b, NULL);
+    ns_rod_material_frame(rod, j, t, m, NULL);
+    double c[3] = {b[1] * m[2] - b[2] * m[1], b[2] * m[0] - b[0] * m[2], b[0] * m[1] - b[1] * m[0]};
+    return atan2(c[0] * t[0] + c[1] * t[1] + c[2] * t[2], b[0] * m[0] + b[1] * m[1] + b[2] * m[2]);
+}
+
+/* One resolution of rod-torsion: the nitinol needle with `edges` edges, torque T on its last
+ * edge, static solve. Returns the tip twist extrapolated from the last two edges (the twist is
+ * linear in arc length) and the worst relative error of every edge's twist against T s / GJ. */
+static int torsion_run(int edges, double T, double GJ, double *tip, double *worst, double *lateral,
+                       int *iters, NsValidateResult *r)
+{
+    NsRodParams p = static_params();
+    p.material.youngs = 50e9; /* the flexible needle (Webster et al. 2006) */
+    p.material.outer_diameter = 0.83e-3;
+    p.material.inner_diameter = 0.0;
+    p.material.density = 6450.0;
+    NsRod rod;
+    if (make_needle(&rod, edges, 0.0, &p, r) != 0)
+        return -1;
+    rod.tip_torque = T;
+    NsRodStats st;
+    *iters = ns_rod_static_solve(&rod, NULL, 1e-10, 50, &st);
+    if (*iters < 0 || st.twist_unconverged) {
+        ns_rod_free(&rod);
+        return fail(r, "static solve failed");
+    }
+    double h = ROD_L / edges;
+    *worst = 0.0;
+    for (int j = 1; j <= edges; j++) { /* edge j's midpoint is (j - 1/2) h past the sleeve */
+        double ref = T * (j - 0.5) * h / GJ;
+        *worst = fmax(*worst, fabs(frame_twist(&rod, j) - ref) / ref);
+    }
+    double a = frame_twist(&rod, edges), b = frame_twist(&rod, edges - 1);
+    *tip = a + 0.5 * (a - b);
+    const double *xt = rod.x + 3 * (rod.nodes - 1);
+    *lateral = sqrt(xt[0] * xt[0] + xt[1] * xt[1]);
+    ns_rod_free(&rod);
+    return 0;
+}
+
+/* End torque on a clamped rod: theta(s) = T s / (G J), J = pi (d_o^4 - d_i^4) / 32. */
+static int rod_torsion(NsValidateResult *r)
+{
+    snprintf(r->metric, sizeof r->metric, "tip twist under an end torque [rad]");
+    double E = 50e9, nu = 0.3, d = 0.83e-3;
+    double GJ = E / (2.0 * (1.0 + nu)) * M_PI * d * d * d * d / 32.0;
+    double T = 0.5 * GJ / ROD_L; /* half a radian at the tip, well below any buckling */
+    double ref = T * ROD_L / GJ, tip[2], worst[2], lat[2];
+    int iters[2], edges[2] = {10, 40};
+    for (int k = 0; k < 2; k++)
+        if (torsion_run(edges[k], T, GJ, tip + k, worst + k, lat + k, iters + k, r) != 0)
+            return -1;
+    r->value = tip[0];
+    r->reference = ref;
+    r->error = fmax(fabs(tip[0] - ref), fabs(tip[1] - ref)) / ref;
+    r->tolerance = 1e-3;
+    double prof = fmax(worst[0], worst[1]);
+    ns_validate_detail(r,
+                       "solid nitinol needle (E 50 GPa, nu 0.3, 0.83 mm: GJ %.4e N m^2), L %.0f "
+                       "mm, end torque %.4e N m, static solve: tip twist %.6f rad (10 edges, %d "
+                       "iterations), %.6f rad (40 edges, %d) against T L / GJ = %.6f rad; every "
+                       "edge's twist against T s / GJ within %.1e (bar 1e-3); tip off the axis "
+                       "by %.1e m",
+                       GJ, 1e3 * ROD_L, T, tip[0], iters[0], tip[1], iters[1], ref, prof,
+                       fmax(lat[0], lat[1]));
+    r->pass = r->error <= r->tolerance && prof <= 1e-3 && fmax(lat[0], lat[1]) <= 1e-9;
+    return 0;
+}
+
 static int rod_length(NsValidateResult *r)
 {
     snprintf(r->metric, sizeof r->metric, "max edge |length / rest length - 1|");
@@ -484,6 +560,8 @@ const NsValidateCase ns_validate_rod_cases[] = {
      rod_buckling},
     {"rod-twist", "base turned half a turn: the tip follows; a curved needle swings over",
      rod_twist},
+    {"rod-torsion", "end torque on a clamped nitinol needle: tip twist T L / GJ (10 and 40 edges)",
+     rod_torsion},
     {"rod-length", "1,000 steps of bending and twisting: length kept within 0.1%", rod_length},
     {"rod-reparam", "split and merge of a bent needle: nodes kept, bending energy kept",
      rod_reparam},

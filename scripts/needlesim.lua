@@ -870,7 +870,7 @@ end
 -- Needle -----------------------------------------------------------------------------------
 
 local NEEDLE_FIELDS = { "kind", "diameter", "inner_diameter", "youngs", "density", "tip",
-    "bevel_deg", "steering", "curvature" }
+    "bevel_deg", "steering", "curvature", "twist_friction" }
 -- The two needles of the paper's brachytherapy runs (§4, Table 2: ProsSS and ProsFB): an 18 G
 -- stainless-steel needle with a symmetric tip, and a flexible nitinol needle with a bevel tip
 -- (the phantom experiments' 0.83 mm needle).
@@ -881,10 +881,14 @@ local NEEDLE_KINDS = {
         tip = "bevel", bevel_deg = 30 },
 }
 
---- ns.needle{kind, diameter, inner_diameter, youngs, density, tip, bevel_deg, steering, curvature}
+--- ns.needle{kind, diameter, inner_diameter, youngs, density, tip, bevel_deg, steering, curvature,
+--            twist_friction}
 -- `kind` ("stiff" or "flexible", default "stiff") gives every field not given. `steering` is
 -- how a bevel tip steers (docs/remeshing.md): "force" (the default: a lateral force at the
--- tip) or "arc" (the nonholonomic model: the cut turns at curvature * tan(bevel) [1/m]).
+-- tip), "displacement" (the paper's §3.5: each cut moved sideways by d * tan(bevel)) or "arc"
+-- (the nonholonomic model: the cut turns at curvature * tan(bevel) [1/m]).
+-- `twist_friction` (default true): the tissue holds the shaft's twist with a stick/slip torque
+-- of at most friction * diameter / 2 per unit length (docs/needle.md).
 function ns.needle(t)
     local where = where_of(2)
     local a = args(t, "ns.needle", where, NEEDLE_FIELDS)
@@ -899,8 +903,9 @@ function ns.needle(t)
         tip = a:choice("tip", { "bevel", "symmetric" }, d.tip),
         bevel_deg = a:number("bevel_deg", function(x) return x > 0 and x < 90 end,
             "in (0, 90) [degrees]", d.bevel_deg),
-        steering = a:choice("steering", { "force", "arc" }, "force"),
+        steering = a:choice("steering", { "force", "displacement", "arc" }, "force"),
         curvature = a:number("curvature", GT0, "> 0 [1/m]", 10),
+        twist_friction = a:boolean("twist_friction", true),
         where = where,
     }
     if n.inner_diameter >= n.diameter then

@@ -225,6 +225,18 @@ static void add_viscous(NsCoupled *c, CoupledSystem *S, NsRodSystem *sys, int k,
     ns_tissue_a_row_touched(T, S->tb[k]);
 }
 
+void coupled_twist_bounds(NsCoupled *c)
+{
+    NsRod *r = c->rod;
+    int ne = r->nodes - 1;
+    double tau_f = c->params.twist_friction
+                       ? c->params.f_perlen * 0.5 * r->params.material.outer_diameter
+                       : 0.0;
+    for (int j = 0; j < ne; j++)
+        r->twist_fric[j] =
+            tau_f > 0.0 && c->ta[j] >= 0 && c->ta[j + 1] >= 0 ? tau_f * r->rest_len[j] : 0.0;
+}
+
 /* Coupling node k at needle node i: its tissue point, state and local frame, its friction
  * threshold (and f_cut at a tip inside the tissue), the known part of the step's relative
  * displacement and the constraint right-hand side of Eq. 8, and the viscous friction. */

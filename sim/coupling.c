@@ -5,6 +5,7 @@
  * (§3.4.2). */
 #include "coupling.h"
 #include "coupling_internal.h"
+#include "mutate.h"
 #include "quality.h"
 #include "snapshot.h"
 
@@ -30,6 +31,7 @@ NsCouplingParams ns_default_coupling_params(void)
     memset(&p, 0, sizeof p);
     p.f_perlen = 10.0; /* N/m: needle-tissue friction of soft tissue, order of Crouch 2005 */
     p.eta = 0.0;
+    p.twist_friction = 1;
     /* §3.6.1 used 1e-3 and 1e-5 in its own units. Here the residual is that of the system scaled
      * to a unit diagonal (coupled_paper.c); at 1e-3 / 1e-5 the friction checks flip on solver
      * error (ten-trial failures, a needle that ran away in friction-stick), at 1e-6 / 1e-8 they
@@ -138,6 +140,11 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
     c->tissue = tissue;
     c->rod = rod;
     c->params = params ? *params : ns_default_coupling_params();
+    c->params.f_perlen = NS_MUTATE("friction", c->params.f_perlen);
+    for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++) {
+        c->params.bevel_force[k] = NS_MUTATE("bevel_force", c->params.bevel_force[k]);
+        c->params.bevel_curvature[k] = NS_MUTATE("bevel_arc", c->params.bevel_curvature[k]);
+    }
     const NsCouplingParams *q = &c->params;
     int bad_bevel = q->bevel_model != NS_BEVEL_FORCE && q->bevel_model != NS_BEVEL_DISPLACEMENT &&
                     q->bevel_model != NS_BEVEL_ARC;
@@ -146,12 +153,13 @@ int ns_coupled_init(NsCoupled *c, NsTissue *tissue, NsRod *rod, NsNeedlePath *pa
                      !(q->bevel_curvature[k] >= 0.0 && isfinite(q->bevel_curvature[k]));
     if (!(q->f_perlen >= 0.0) || !(q->eta >= 0.0) || !(q->tau_sol > 0.0) ||
         !(q->tau_check >= q->tau_sol) || q->max_trials < 1 || q->max_iter < 1 ||
-        q->refresh_iterations < 0 || bad_bevel ||
+        q->refresh_iterations < 0 || bad_bevel || (q->twist_friction & ~1) ||
         !(q->remesh_dihedral_floor >= 0.0 && q->remesh_dihedral_floor <= 60.0) ||
         (q->solver != NS_COUPLED_PAPER && q->solver != NS_COUPLED_SCHUR)) {
         snprintf(err, (size_t)err_sz,
                  "coupling: f_perlen and eta must be >= 0, 0 < tau_sol <= tau_check, "
                  "max_trials and max_iter >= 1, refresh_iterations >= 0, solver schur or paper, "
+                 "twist_friction 0 or 1, "
                  "remesh_dihedral_floor in [0, 60] deg, "
                  "bevel model force, displacement or arc with finite bevel forces and "
                  "curvatures >= 0");

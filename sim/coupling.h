@@ -81,6 +81,9 @@ typedef enum NsBevelModel {
 typedef struct NsCouplingParams {
     double f_perlen; /* friction per unit length inside the tissue [N/m] */
     double eta;      /* viscous friction per unit length [N s/m^2] */
+    /* 1: torsional stick/slip friction on the twist of the edges inside the tissue, bounded by
+     * f_perlen r_o per unit length (sim/twist_friction.h); 0: the paper's model (none) */
+    int twist_friction;
     double cut_force[NS_COUPLING_MAX_REGIONS]; /* f_cut by tissue region [N] */
     double tau_check, tau_sol;                 /* relative residuals (§3.6.1: 1e-3, 1e-5) */
     int max_trials;                            /* friction configurations tried per step (10) */
@@ -151,6 +154,9 @@ typedef struct NsCouplingStats {
      * left the tissue through its surface this step (not back through its entry); tip_returned:
      * a needle through the far side was drawn back in until its tip was at the exit again. */
     int bone_contact, bone_region, stalled, tip_exit, tip_returned;
+    /* remesh: a withdrawn needle entered the tissue again this step (a fresh skin entry where
+     * it crossed the surface, sim/coupling_reentry.c); reentry_first: its first node inside */
+    int reentered, reentry_first;
 } NsCouplingStats;
 
 typedef struct NsCoupled {
@@ -170,10 +176,10 @@ typedef struct NsCoupled {
     int remesh_hint;            /* a tet near the tip, where point location starts */
     int path_cap;               /* entries allocated in path.node and path.s */
     int outside;                /* params.remesh: the needle was withdrawn out of the tissue */
-    /* outside: where the track met the skin (the entry node's world position as the needle
-     * left), its unit direction inwards (world), and the tip's depth along it then [m]: the
-     * needle leaves with its tip still that far in (coupling_tip.c, EXIT_MARGIN) */
-    double exit_x[3], exit_dir[3], exit_depth;
+    /* outside: how deep the tip still was as the needle left (material space, along its track)
+     * [m]: it leaves with its tip up to that far in (coupling_tip.c, EXIT_MARGIN), and re-enters
+     * only once pushed deeper (coupling_reentry.c) */
+    double exit_depth;
     double heading[3]; /* NS_BEVEL_ARC: the cut's unit heading in material space */
     int heading_valid; /* 0: taken from the needle's tip tangent when it next cuts */
     /* params.remesh: the tip rests on a rigid region (bone): a commanded insertion is not fed

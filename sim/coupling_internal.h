@@ -22,6 +22,11 @@ void coupled_tissue_point(const NsCoupled *c, int i, const double *v, double *ou
 int coupled_bevel_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
                        double **et, double **er);
 int coupled_count(const NsCoupled *c); /* coupling nodes now */
+/* Sets c->rod->twist_fric for the step about to be taken (sim/twist_friction.h): tau_f l_j (l_j
+ * the rest length) on every edge whose two nodes are coupled to the tissue (the edges the sliding
+ * friction counts), tau_f = f_perlen r_o, and 0 elsewhere; all 0 when params.twist_friction is
+ * 0. */
+void coupled_twist_bounds(NsCoupled *c);
 /* Scratch sizes of the system of q coupling nodes: doubles, ints (and q + 1 bytes). */
 size_t coupled_system_doubles(int q);
 size_t coupled_system_ints(int q);
@@ -40,6 +45,14 @@ void coupled_known_forces(CoupledSystem *S);
  * the tip's node released from bone. */
 int coupled_cut_tip(NsCoupled *c, NsCouplingStats *st);
 void coupled_unpin_tip(NsCoupled *c);
+/* The last point inside the deformed tissue on the world segment xa (inside) -> xb (outside),
+ * as a material point u; returns its tet, or -1 when xa is not inside. */
+int coupled_world_exit_point(const NsMesh *M, const double xa[3], const double xb[3], int hint,
+                             double u[3]);
+/* coupling_reentry.c: a withdrawn needle whose tip is in the tissue again enters afresh where
+ * it crosses the surface (skin entry; path, states and tip reset). 0 (still outside, or not
+ * deep enough yet), 1 (entered: the caller cuts to the tip), -1 (c->error says why). */
+int coupled_reenter(NsCoupled *c, NsCouplingStats *st);
 /* coupling_reparam.c: the needle rebuilt on its tissue points (§3.4.2). */
 int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st);
 

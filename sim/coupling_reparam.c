@@ -20,29 +20,16 @@ static double norm3(const double *a)
     return sqrt(dot3(a, a));
 }
 
-/* Outside the tissue: nothing is coupled. A withdrawn needle pushed back in (its tip in the tissue
- * deeper than it was as it left) would pass through the tissue unseen: re-entry is not handled
- * yet, so it is an error. Free of the tissue, the rod
- * still splits and merges its edges: a retraction shortens the edge at the sleeve, which must
- * merge with the next to go on. */
+/* Outside the tissue: nothing is coupled (a needle pushed back in enters afresh in the tip's
+ * cut, coupling_reentry.c; one whose tip is not yet deeper than it was as it left, nor a
+ * fiftieth of an element in, waits). Free
+ * of the tissue, the rod still splits and merges its edges: a retraction shortens the edge at
+ * the sleeve, which must merge with the next to go on. */
 static int reparameterize_free(NsCoupled *c, NsCouplingStats *st)
 {
     NsRod *r = c->rod;
-    const NsMesh *M = &c->tissue->mesh;
     if (!c->outside)
         return 0;
-    /* Inside the tissue, deeper along the track than the tip was as it left (it leaves a
-     * little way inside: coupling_tip.c, EXIT_MARGIN): pushed back in. */
-    const double *tip = r->x + 3 * (r->nodes - 1);
-    double depth = 0.0;
-    for (int i = 0; i < 3; i++)
-        depth += (tip[i] - c->exit_x[i]) * c->exit_dir[i];
-    if (depth > c->exit_depth && ns_mesh_locate_in(M, M->x, tip, c->remesh_hint, 1e-9, NULL) >= 0) {
-        snprintf(c->error, sizeof c->error,
-                 "the needle went back into the tissue after leaving it (re-entry is not "
-                 "modelled yet)");
-        return -1;
-    }
     NsRodStats rs;
     memset(&rs, 0, sizeof rs);
     if (ns_rod_reparameterize(r, &rs) || coupled_reserve(c, r->cap))
@@ -201,11 +188,17 @@ int coupled_reparameterize(NsCoupled *c, NsCouplingStats *st)
             first = first < 0 ? i : first;
             last = i;
         }
+    if (first < 0 && st->reentered) { /* entered afresh: rebuilt from its first node inside */
+        first = st->reentry_first;
+        last = n - 1;
+    }
     if (first < 0)
         return reparameterize_free(c, st);
-    if (c->outside) { /* withdrawn this step: the needle keeps its solved shape, coupled nowhere */
+    if (c->outside) { /* withdrawn this step: the needle keeps its solved shape, coupled nowhere,
+                       * and its edges split and merge as a free needle's (a retraction that ate
+                       * the edge at the sleeve this step must merge it before the next) */
         coupled_from_path(c, 0, 0);
-        return 0;
+        return reparameterize_free(c, st);
     }
     /* Out through the far side this step: the needle's tip, outside, stays free beyond the exit
      * node. */

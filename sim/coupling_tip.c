@@ -4,6 +4,7 @@
  * and the physical outcomes at the tip (bone contact, far-side exit, withdrawal; issue 32,
  * docs/remeshing.md). */
 #include "coupling_internal.h"
+#include "mutate.h"
 #include "quality.h"
 
 #include <math.h>
@@ -173,8 +174,8 @@ static double rigid_crossing(const NsMesh *M, const double a[3], const double b[
 /* The last point inside the deformed tissue on the world segment xa (inside) -> xb (outside),
  * by bisection, as a material point u and the tet holding it. Returns the tet, or -1 when xa is
  * not inside either. */
-static int world_exit_point(const NsMesh *M, const double xa[3], const double xb[3], int hint,
-                            double u[3])
+int coupled_world_exit_point(const NsMesh *M, const double xa[3], const double xb[3], int hint,
+                             double u[3])
 {
     double b[4], bm[4], q[3];
     int t = ns_mesh_locate_in(M, M->x, xa, hint, 1e-9, b);
@@ -268,10 +269,8 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
     int t = ns_mesh_locate_in(M, M->x, r->x + 3 * (r->nodes - 1), start, 1e-9, b);
     int retracting = c->state[r->nodes - 1] == NS_FRICTION_DYN_NEG;
     double *u_new = m->u_new;
-    if (t < 0 && !(retracting && p->count == 2)) {
-        if (retracting)
-            return -1; /* drawn back out of the tissue elsewhere than at the entry: not modelled */
-        t = world_exit_point(M, M->x + 3 * tipn, r->x + 3 * (r->nodes - 1), start, u_new);
+    if (t < 0 && !retracting) {
+        t = coupled_world_exit_point(M, M->x + 3 * tipn, r->x + 3 * (r->nodes - 1), start, u_new);
         if (t < 0)
             return -1;
         m->exiting = 1;
@@ -280,34 +279,33 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
     for (int k = 0; k < 4 && t >= 0 && !m->exiting; k++)
         for (int i = 0; i < 3; i++)
             u_new[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
-    if (!(retracting && p->count == 2))
+    /* Withdrawn: a retracting tip outside the tissue (a retracting needle goes back along its
+     * own track, so it left through its entry, in one step when the step draws it back further
+     * than its remaining depth), or, its path down to the skin entry's two nodes, within
+     * EXIT_MARGIN of the entry node's mean edge of it along the track (ours, issue 35): the last
+     * node the tip drags towards the entry node makes tets with it and its star's far edges
+     * whose dihedral angles shrink with the distance between the two (2.8 deg at a twelfth of an
+     * element in remesh-cycles), the exit's counterpart of the skin entry's short edge
+     * (remesh_entry.c). The tip, then that little way inside, is free; pushed in again deeper
+     * than that, it enters afresh (coupling_reentry.c). */
+    if (!retracting || (t >= 0 && p->count != 2))
         return 0;
-    /* Ours (issue 35): the needle leaves once its tip is drawn back to within EXIT_MARGIN of the
-     * entry node's mean edge from it, along the track, not only once it is behind it:
-     * the last node the tip drags towards the entry node makes tets with it and its star's far
-     * edges whose dihedral angles shrink with the distance between the two (2.8 deg at a
-     * twelfth of an element in remesh-cycles), the exit's counterpart of the skin entry's short
-     * edge (remesh_entry.c). The tip, then that little way inside, is free. */
     int en = p->node[0];
-    const double *ue = M->u + 3 * en, *ut = M->u + 3 * tipn;
-    double along = 0.0, track = 0.0;
-    for (int i = 0; i < 3; i++) {
-        along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
-        track += (ut[i] - ue[i]) * (ut[i] - ue[i]);
+    double along = 0.0;
+    if (t >= 0) {
+        const double *ue = M->u + 3 * en, *ut = M->u + 3 * tipn;
+        double track = 0.0;
+        for (int i = 0; i < 3; i++) {
+            along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
+            track += (ut[i] - ue[i]) * (ut[i] - ue[i]);
+        }
+        along = track > 0.0 ? along / sqrt(track) : 0.0; /* the tip's depth along the track [m] */
+        if (!(along <= EXIT_MARGIN * node_edge_mean(M, en)))
+            return 0;
     }
-    along = track > 0.0 ? along / sqrt(track) : 0.0; /* the tip's depth along the track [m] */
-    if (t >= 0 && !(along <= EXIT_MARGIN * node_edge_mean(M, en)))
-        return 0;
-    /* Where the needle leaves, for the check that it is not pushed back in (re-entry). */
-    double dx[3], dl = 0.0;
-    for (int i = 0; i < 3; i++) {
-        dx[i] = M->x[3 * tipn + i] - M->x[3 * en + i];
-        dl += dx[i] * dx[i];
-    }
-    dl = sqrt(dl);
-    for (int i = 0; i < 3; i++)
-        c->exit_dir[i] = dl > 0.0 ? dx[i] / dl : 0.0;
-    c->exit_depth = t >= 0 ? fmax(along, 0.0) : 0.0; /* (t < 0: the tip is already out) */
+    /* How deep the tip still is as it leaves (material space): coupled_reenter waits until the
+     * needle is pushed deeper than that. */
+    c->exit_depth = t >= 0 ? fmax(along, 0.0) : 0.0;
     /* Algorithm 2 should have undone every split but the one that made the tip's node (undoing
      * that one is the retraction's own last step). */
     st->exit_undone =
@@ -319,7 +317,6 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
             return -1;
         }
     ns_remesh_release_all(M, &c->remesh);
-    memcpy(c->exit_x, M->x + 3 * en, sizeof c->exit_x);
     c->outside = 1;
     c->heading_valid = 0;
     st->exited = 1;
@@ -343,7 +340,7 @@ static int bevel_displace(const NsCoupled *c, TipCut *m)
     ns_rod_tip_frame(r, tt, m1, m2);
     for (int i = 0; i < 3; i++)
         d += (u_new[i] - M->u[3 * m->tipn + i]) * (u_new[i] - M->u[3 * m->tipn + i]);
-    d = sqrt(d) * tan(r->params.bevel_angle);
+    d = sqrt(d) * NS_MUTATE("bevel_disp", tan(r->params.bevel_angle));
     for (int i = 0; i < 3; i++)
         u_new[i] += d * m2[i];
     return ns_mesh_locate(M, u_new, m->t, 1e-9, NULL) < 0 ? -1 : 0;
@@ -644,8 +641,20 @@ int coupled_cut_tip(NsCoupled *c, NsCouplingStats *st)
     int n = r->nodes, coupled = 0;
     for (int i = 0; i < n; i++)
         coupled |= c->ta[i] >= 0;
-    if (!coupled)
-        return 0; /* outside the tissue: nothing cuts */
+    if (!coupled && !(c->params.remesh && c->outside))
+        return 0;
+    if (!coupled) {
+        /* Withdrawn: nothing cuts until the needle is pushed in again, a fresh skin entry
+         * (coupling_reentry.c), whose tip node Algorithm 2 then takes to the needle's tip. */
+        int rc = coupled_reenter(c, st);
+        if (rc <= 0)
+            return rc;
+        rc = remesh_tip(c, st);
+        c->state[n - 1] = NS_FRICTION_STATIC; /* a fresh entry's states, all STATIC */
+        if (rc == 0 && !c->outside)
+            tip_dihedrals(c, st);
+        return rc;
+    }
     st->tip_slide = 0.0;
     if (c->params.remesh) {
         /* Through the far side (issue 32): drawn back until its tip is within a quarter of the

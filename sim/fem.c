@@ -11,6 +11,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "mutate.h"
 #include "svd3.h"
 
 NsFemMaterial ns_fem_material(NsElasticModel model, double youngs, double poisson, double damp_mu,
@@ -18,6 +19,7 @@ NsFemMaterial ns_fem_material(NsElasticModel model, double youngs, double poisso
 {
     NsFemMaterial m;
     m.model = model;
+    youngs = NS_MUTATE("youngs", youngs);
     m.mu = youngs / (2.0 * (1.0 + poisson));
     m.lambda = youngs * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
     m.damp_mu = damp_mu;

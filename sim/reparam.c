@@ -176,6 +176,8 @@ static int resample(NsRod *r, const double *xn, const double *s, int m, int line
         if (j > 0)
             psi += r->ref_twist[j];
         r->theta[j] = phin[j] - psi;
+        r->twist_anchor[j] = r->theta[j]; /* the edges are new: the next step sets both */
+        r->twist_fric[j] = 0.0;
     }
     for (int j = 0; j < m; j++) {
         r->rest_curv[2 * j] = j > 0 && j < me ? k1n[j] : 0.0;

@@ -9,8 +9,10 @@
 #include <time.h>
 
 #include "err.h"
+#include "mutate.h"
 #include "rod_internal.h"
 #include "snapshot.h"
+#include "twist_friction.h"
 
 /* ---- small vector helpers ---- */
 
@@ -244,6 +246,8 @@ int rod_reserve(NsRod *r, int cap)
     GROW(ref_twist, n);
     GROW(rest_curv, 2 * n);
     GROW(pinned, n);
+    GROW(twist_fric, n);
+    GROW(twist_anchor, n);
     GROW(work, WORK_PER_NODE * n);
 #undef GROW
     size_t old = (size_t)r->cap;
@@ -260,6 +264,8 @@ int rod_reserve(NsRod *r, int cap)
     ZERO_TAIL(ref_twist, 1);
     ZERO_TAIL(rest_curv, 2);
     ZERO_TAIL(pinned, 1);
+    ZERO_TAIL(twist_fric, 1);
+    ZERO_TAIL(twist_anchor, 1);
 #undef ZERO_TAIL
     NsBanded K, D, A;
     if (ns_banded_init(&K, c, 2) || ns_banded_init(&D, c, 2) || ns_banded_init(&A, c, 2)) {
@@ -284,6 +290,7 @@ static void rod_blank(void *e)
     h->x = h->v = h->a = h->mass = h->force = h->rest_len = h->theta = NULL;
     h->ref_t = h->ref_d1 = h->ref_twist = h->rest_curv = h->work = NULL;
     h->pinned = NULL;
+    h->twist_fric = h->twist_anchor = NULL;
     memset(&h->K, 0, sizeof h->K);
     memset(&h->D, 0, sizeof h->D);
     memset(&h->A, 0, sizeof h->A);
@@ -307,6 +314,8 @@ int ns_rod_pack(NsPack *p, NsRod *r)
     NS_PACK_ARRAY(p, r->ref_twist, c, c);
     NS_PACK_ARRAY(p, r->rest_curv, 2 * c, 2 * c);
     NS_PACK_ARRAY(p, r->pinned, c, c);
+    NS_PACK_ARRAY(p, r->twist_fric, c, c);
+    NS_PACK_ARRAY(p, r->twist_anchor, c, c);
     NS_PACK_ARRAY(p, r->work, WORK_PER_NODE * c, WORK_PER_NODE * c);
     ns_banded_pack(p, &r->K);
     ns_banded_pack(p, &r->D);
@@ -328,6 +337,8 @@ void ns_rod_free(NsRod *r)
     free(r->ref_twist);
     free(r->rest_curv);
     free(r->pinned);
+    free(r->twist_fric);
+    free(r->twist_anchor);
     free(r->work);
     ns_banded_free(&r->K);
     ns_banded_free(&r->D);
@@ -626,26 +637,49 @@ static int twist_tridiag(int ne, int first, const double *hd, const double *ho, 
 }
 
 /* Newton direction for the twist: the full Hessian, else its Gauss-Newton part; for a free rod
- * all angles move, else (or if that is singular) theta_0 is held. Returns the first free angle,
- * or -1 if no direction was found. */
+ * all angles move, else (or if that is singular) theta_0 is held. The tip torque enters the
+ * gradient; with friction (fw != NULL) the direction is the friction step's (stick/slip,
+ * sim/twist_friction.h). Returns the first free angle, or -1 if no direction was found. */
 static int twist_direction(const NsRod *r, const TwistNode *tn, double *g, double *hd, double *ho,
-                           double *dx, double *cp)
+                           double *dx, double *cp, double *fw)
 {
     int ne = r->nodes - 1;
     for (int first = r->held ? 1 : 0; first <= 1; first++)
         for (int gn = 0; gn <= 1; gn++) {
             twist_energy(r, tn, r->theta, g, hd, ho, gn);
-            if (twist_tridiag(ne, first, hd, ho, g, dx, cp) == 0)
+            if (r->tip_torque != 0.0)
+                g[ne - 1] -= r->tip_torque;
+            if (fw ? ns_twist_friction_step(ne, first, hd, ho, g, r->theta, r->twist_anchor,
+                                            r->twist_fric, dx, fw) > 0
+                   : twist_tridiag(ne, first, hd, ho, g, dx, cp) == 0)
                 return first;
         }
     return -1;
+}
+
+/* The potential the quasi-static twist minimises: the elastic energy's theta-dependent part,
+ * minus the tip torque's work, plus the friction's dissipation from the anchors (fric: friction
+ * on; sim/twist_friction.h). */
+static double twist_potential(const NsRod *r, const TwistNode *tn, const double *theta, int fric)
+{
+    int ne = r->nodes - 1;
+    double E = twist_energy(r, tn, theta, NULL, NULL, NULL, 0);
+    if (r->tip_torque != 0.0)
+        E -= r->tip_torque * theta[ne - 1];
+    if (fric)
+        E += ns_twist_friction_energy(ne, theta, r->twist_anchor, r->twist_fric);
+    return E;
 }
 
 static void solve_twist(NsRod *r, NsRodStats *stats)
 {
     int n = r->nodes, ne = n - 1;
     TwistNode *tn = malloc((size_t)n * sizeof *tn);
-    double *buf = malloc((size_t)ne * 7 * sizeof(double));
+    int fric = 0;
+    for (int j = 0; j < ne && !fric; j++)
+        fric = r->twist_fric[j] > 0.0;
+    double *buf =
+        malloc(((size_t)ne * 7 + (fric ? NS_TWIST_FRICTION_WORK(ne) : 0)) * sizeof(double));
     if (!tn || !buf) {
         free(tn);
         free(buf);
@@ -654,6 +688,7 @@ static void solve_twist(NsRod *r, NsRodStats *stats)
         return;
     }
     double *g = buf, *hd = g + ne, *ho = hd + ne, *dx = ho + ne, *cp = dx + ne, *trial = cp + ne;
+    double *fw = fric ? trial + ne : NULL;
     for (int i = 1; i < ne; i++) {
         TwistNode *q = &tn[i];
         const double *ta = r->ref_t + 3 * (i - 1), *tb = r->ref_t + 3 * i;
@@ -669,8 +704,8 @@ static void solve_twist(NsRod *r, NsRodStats *stats)
     }
     int it, converged = ne < 2;
     for (it = 0; it < r->params.twist_max_iter && !converged; it++) {
-        double E = twist_energy(r, tn, r->theta, NULL, NULL, NULL, 0);
-        int first = twist_direction(r, tn, g, hd, ho, dx, cp);
+        double E = twist_potential(r, tn, r->theta, fric);
+        int first = twist_direction(r, tn, g, hd, ho, dx, cp, fw);
         if (first < 0)
             break;
         double step = 0.0, slope = 0.0;
@@ -678,6 +713,12 @@ static void solve_twist(NsRod *r, NsRodStats *stats)
             step = fabs(dx[j]) > step ? fabs(dx[j]) : step;
             slope += g[j] * dx[j];
         }
+        /* With friction the potential is not smooth: its decrease predicted by the model's
+         * linear part, g dx plus the change of the friction term (Tseng and Yun 2009, Math.
+         * Program. 117, the Armijo rule for l1 terms). */
+        for (int j = first; j < ne && fric; j++)
+            slope += r->twist_fric[j] * (fabs(r->theta[j] + dx[j] - r->twist_anchor[j]) -
+                                         fabs(r->theta[j] - r->twist_anchor[j]));
         if (!(step > r->params.twist_tol)) {
             converged = 1;
             break;
@@ -686,7 +727,7 @@ static void solve_twist(NsRod *r, NsRodStats *stats)
         for (int ls = 0; ls < 30; ls++) {
             for (int j = 0; j < ne; j++)
                 trial[j] = r->theta[j] + alpha * dx[j];
-            double Et = twist_energy(r, tn, trial, NULL, NULL, NULL, 0);
+            double Et = twist_potential(r, tn, trial, fric);
             if (Et <= E + 1e-4 * alpha * slope || alpha * step <= r->params.twist_tol)
                 break;
             alpha *= 0.5;
@@ -808,8 +849,8 @@ int ns_rod_init(NsRod *r, const double *x, int n, const double *d1, int held,
     double G = m->shear > 0.0 ? m->shear : m->youngs / (2.0 * (1.0 + m->poisson));
     double I = 0.25 * M_PI * (ro * ro * ro * ro - ri * ri * ri * ri);
     r->area = M_PI * (ro * ro - ri * ri);
-    r->bend_stiff = m->youngs * I;
-    r->twist_stiff = G * 2.0 * I; /* J = 2 I for a circular (hollow) section */
+    r->bend_stiff = NS_MUTATE("ei", m->youngs * I);
+    r->twist_stiff = NS_MUTATE("gj", G * 2.0 * I); /* J = 2 I for a circular (hollow) section */
     r->stretch_stiff = p.stretch_scale * m->youngs * r->area;
     r->lin_density = m->density * r->area;
     memcpy(r->x, x, 3 * (size_t)n * sizeof(double));
@@ -1068,6 +1109,7 @@ int ns_rod_begin_step(NsRod *r, double dt, const double *ext, NsRodSystem *sys, 
     r->undo_len1 = ne > 1 ? r->rest_len[1] : 0.0;
     edge_strains(r, eps0);
     memcpy(theta0, r->theta, (size_t)ne * sizeof *theta0);
+    memcpy(r->twist_anchor, r->theta, (size_t)ne * sizeof *r->twist_anchor);
     memcpy(asave, r->a, (size_t)n3 * sizeof *asave);
     double tf = now_ms();
     int nf = 3 * r->held;
@@ -1238,6 +1280,7 @@ int ns_rod_static_solve(NsRod *r, const double *ext, double tol, int max_iter, N
     memset(dof_fixed, 1, (size_t)nf);
     memset(r->v, 0, (size_t)n3 * sizeof(double));
     memset(r->a, 0, (size_t)n3 * sizeof(double));
+    memcpy(r->twist_anchor, r->theta, (size_t)(n - 1) * sizeof *r->twist_anchor);
     double applied = 0.0;
     for (int i = 0; i < n && ext; i++)
         for (int c = 0; c < 3; c++)

@@ -22,6 +22,9 @@
  * The implicit step is the paper's Newmark scheme (§3.1, Eq. 1-4, 6) with the Jacobians in a
  * banded matrix of 3x3 blocks, half-bandwidth 2 (sim/banded.h).
  *
+ * Torsional friction with the tissue (sim/twist_friction.h) and an end torque enter the
+ * quasi-static twist.
+ *
  * Base manipulation (§3.5): the guide sleeve holds nodes 0 and 1, which move with the sleeve
  * velocity v_base; each step lengthens edge 1 (the first edge outside the sleeve) by
  * v_insert dt, and adds phi dt to theta_0, the twist of the edge inside the sleeve.
@@ -109,11 +112,21 @@ typedef struct NsRod {
     double *ref_twist; /* (cap) per interior node: reference twist [rad] */
     double *rest_curv; /* (cap x 2) per interior node: rest material curvature [1/m] */
     uint8_t *pinned;   /* (cap) caller's flag: node must survive reparameterization */
+    /* Torsional friction (sim/twist_friction.h), per edge (cap): twist_fric is the largest
+     * friction torque that can hold edge j's twist [N m] (0: none), set by the caller before a
+     * step (the coupling sets it from the tissue contact; reparameterization zeroes it);
+     * twist_anchor is theta at the start of the step (or of the static solve), where a sticking
+     * edge stays [rad]. */
+    double *twist_fric, *twist_anchor;
 
     /* Controls (§3.5), set by the caller between steps. */
     double v_base[3];  /* sleeve velocity [m/s] */
     double v_insert;   /* insertion speed [m/s] (negative retracts) */
     double twist_rate; /* base angular velocity phi [rad/s] */
+    /* An external moment about the tip's tangent on the last edge [N m], acting on its material
+     * angle (work tip_torque theta_last in the quasi-static twist). A moment normal to the
+     * tangent bends: apply it as a couple of forces through ext. */
+    double tip_torque;
 
     NsBanded K, D, A; /* dF/dx [N/m], dF/dv [N s/m], the Newmark system matrix */
     double *work;     /* scratch */

@@ -82,6 +82,7 @@ static int bevel_load(Step *s)
 static int needle_forces(Step *s)
 {
     const double *ext = s->bev_r ? s->bev_r : s->ctl->ext_rod;
+    coupled_twist_bounds(s->c); /* torsional friction of the edges inside (twist_friction.h) */
     if (ns_rod_begin_step(s->c->rod, s->dt, ext, &s->sys, &s->rs)) {
         char msg[96];
         snprintf(msg, sizeof msg, "the needle's forces or Jacobians failed (NaN %d)",

@@ -383,7 +383,7 @@ expect_error "camera: misspelt field" 1 \
     "tests/data/bad_camera_field.lua:2: ns.scenario: camera: unknown field 'tet_edge'" \
     "did you mean 'tet_edges'" -- check tests/data/bad_camera_field.lua
 expect_error "needle: unknown steering model" 1 \
-    "tests/data/bad_steering.lua:6: ns.needle: steering must be one of 'force', 'arc'" \
+    "tests/data/bad_steering.lua:6: ns.needle: steering must be one of 'force', 'displacement', 'arc'" \
     "(got 'sideways')" -- check tests/data/bad_steering.lua
 expect_error "needle: curvature without the arc model" 1 \
     "tests/data/bad_curvature.lua:6: ns.needle: curvature is the arc model's" -- \

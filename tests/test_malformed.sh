@@ -67,6 +67,7 @@ expect "erroring __index, field removed" 1 "targets[1].tolerance" -- $R meta_ind
 expect "__len returning 1.5" 1 "dt must be" -- $R meta_len.lua
 expect "camera.frame_every = 0" 1 "camera.frame_every" -- $R frame_every_zero.lua
 expect "dt = NaN" 1 "dt must be" -- $R dt_nan.lua
+expect "needle.steering = \"sideways\"" 1 "needle.steering must be" -- $R steering_raw.lua
 expect "entry.point = {\"a\", {}, nil}" 1 "entry.point" -- $R entry_point.lua
 expect "duration = 1e9" 1 "duration must be" -- $R duration_huge.lua
 expect "tolerance = 0" 1 "tolerance must be" -- $R tolerance_zero.lua

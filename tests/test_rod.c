@@ -2,9 +2,11 @@
  * (central differences, relative error < 1e-5) for bending, twisting and stretching; the
  * quasi-static twist is stationary; the Jacobian matches differences where it is exact and is
  * definite where it is not; a rod created in a shape rests in it; stepping is deterministic;
- * resampling and split / merge keep what they must. */
+ * resampling and split / merge keep what they must; the twist's friction step meets the stick/slip
+ * conditions, the active set's M-matrix case and the coordinate descent's general one alike. */
 #include "ns_test.h"
 #include "rod.h"
+#include "twist_friction.h"
 
 #include <stdint.h>
 #include <stdlib.h>
@@ -350,7 +352,57 @@ static int free_rod_untwists(void)
     return 0;
 }
 
+/* The friction step (sim/twist_friction.h) on random definite tridiagonal Hessians, with negative
+ * off-diagonals (an M-matrix: the active set) and with either sign (it may cycle: the coordinate
+ * descent): at its answer every edge with a bound sticks with |torque| <= bound or slips with a
+ * torque of exactly bound against its slip, and every other free edge is in equilibrium. */
+static int twist_friction_step_optimal(void)
+{
+    uint64_t st = 7;
+    double worst = 0.0;
+    int fallbacks = 0;
+    for (int trial = 0; trial < 400; trial++) {
+        int ne = 3 + trial % 37, first = trial % 2;
+        int mixed = trial % 4 >= 2; /* 3: barely dominant, where the active set may cycle */
+        double hd[40], ho[40], g[40], th[40], an[40], c[40], dx[40];
+        double work[6 * 40];
+        for (int j = 0; j < ne; j++) {
+            ho[j] = mixed ? 0.9 * rnd(&st) : -0.9 * fabs(rnd(&st));
+            th[j] = rnd(&st);
+            an[j] = th[j] + 0.1 * rnd(&st) * (j % 3 == 0);
+            c[j] = j % 5 == 4 ? 0.0 : 0.5 * fabs(rnd(&st));
+            g[j] = 2.0 * rnd(&st);
+        }
+        for (int j = 0; j < ne; j++) /* diagonally dominant: definite */
+            hd[j] = (trial % 4 == 3 ? 1e-3 : 2.0 + fabs(rnd(&st))) +
+                    (j > 0 ? fabs(ho[j - 1]) : 0.0) + fabs(ho[j]);
+        int w = ns_twist_friction_step(ne, first, hd, ho, g, th, an, c, dx, work);
+        ENSURE(w > 0);
+        fallbacks += w > 4 * ne + 20; /* the active set cycled: coordinate descent */
+        for (int j = 0; j < first; j++)
+            ENSURE(dx[j] == 0.0);
+        for (int j = first; j < ne; j++) {
+            double r = g[j] + hd[j] * dx[j] + (j > 0 ? ho[j - 1] * dx[j - 1] : 0.0) +
+                       (j + 1 < ne ? ho[j] * dx[j + 1] : 0.0);
+            double y = th[j] + dx[j] - an[j], e;
+            if (c[j] == 0.0)
+                e = fabs(r);
+            else if (fabs(y) <= 1e-12)
+                e = fmax(0.0, fabs(r) - c[j]);
+            else
+                e = fabs(r + (y > 0.0 ? c[j] : -c[j]));
+            worst = fmax(worst, e);
+        }
+    }
+    printf("  worst stick/slip residual %.2e N m (bounds up to 0.5); %d of 400 by the fallback\n",
+           worst, fallbacks);
+    ENSURE(worst < 1e-9);
+    ENSURE(fallbacks > 0); /* both paths are tested */
+    return 0;
+}
+
 NS_TEST_MAIN({"free_rod_untwists", free_rod_untwists},
+             {"twist_friction_step_optimal", twist_friction_step_optimal},
              {"large_step_keeps_length", large_step_keeps_length},
              {"forces_match_energy_bending_twisting", forces_match_energy_bending_twisting},
              {"forces_match_energy_all", forces_match_energy_all},

@@ -4,7 +4,8 @@
 # same with 1 and 2 threads; bad input (a script error, a target outside the tissue, a negative
 # speed, an unwritable output folder) exits 1 naming the file and line or field and leaves no
 # report.json; usage errors exit 2; a needle aimed at bone and one pushed out through the far side
-# each exit 0 with a complete report and the event in it.
+# each exit 0 with a complete report and the event in it; a needle withdrawn and pushed in again
+# (the same hole, then a new point) enters afresh each time, deterministically.
 #
 # With `brachytherapy` as third argument it runs the brachytherapy scenario instead (a separate
 # meson test, not in the sanitizer build): it succeeds, every report field is finite, both seeds
@@ -737,6 +738,42 @@ assert e["tip_m"][2] > 0.015, e  # the block is 15 mm thick (its far face pushed
 assert r["needle"]["depth_m"] < 0, r["needle"]  # drawn back through it and out
 assert r["mesh"]["min_dihedral_deg"] > 44.9, r["mesh"]  # the original mesh is back
 print("out through the far side at %.2f s, %.1f mm deep; then withdrawn" % (e["t_s"], 1e3 * e["tip_m"][2]))'
+# Re-entry (issue 35): a needle withdrawn all the way out goes in again through its hole, then,
+# its base moved 1 cm over, at a new point. Two needle_reentry events where the tip crossed the
+# surface, the tip cutting after each, nothing inverted, and the same state hash twice.
+for k in 1 2; do
+    "$BIN" run "$SRC/tests/data/reentry.lua" -o "$TMP/o_re$k" --no-render --quiet >/dev/null 2>"$TMP/err_re$k"
+    echo $? >"$TMP/rc_re$k"
+done
+python3 - "$TMP/o_re1" "$TMP/o_re2" "$TMP/finite.py" <<'PY' >"$TMP/py_re" 2>&1
+import csv, json, sys
+r = json.load(open(sys.argv[1] + "/report.json"))
+exec(open(sys.argv[3]).read())
+finite(r, "report")
+assert r["script_finished"] and r["steps"] > 0, r["steps"]
+ev = [e for e in r["events"] if e["type"] == "needle_reentry"]
+assert len(ev) == 2, r["events"]
+assert abs(ev[0]["tip_m"][0]) < 1e-4 and abs(ev[1]["tip_m"][0] - 0.01) < 1e-4, ev  # hole; 1 cm over
+assert all(0 < e["tip_m"][2] < 1e-3 for e in ev), ev  # caught within a millimetre of the surface
+rows = list(csv.DictReader(open(sys.argv[1] + "/trajectory.csv")))
+for e in ev:  # the tip cuts again after each re-entry
+    cut = [w for w in rows if float(w["t_s"]) > e["t_s"] and w["cutting"] == "1"]
+    assert cut, e
+w = r["warnings"]
+assert w["nan"] == 0 and w["inverted"] == 0, w
+assert r["needle"]["depth_m"] > 0.0095 and r["needle"]["path_cut_m"] > 0.03, r["needle"]
+h2 = json.load(open(sys.argv[2] + "/report.json"))["state_hash"]
+assert r["state_hash"] == h2, (r["state_hash"], h2)
+print("re-entered at %.2f s (the hole) and %.2f s (1 cm over), cutting after each; %.1f mm cut; "
+      "hash %s twice" % (ev[0]["t_s"], ev[1]["t_s"], 1e3 * r["needle"]["path_cut_m"],
+                         r["state_hash"]))
+PY
+prc=$?
+if [ "$(cat "$TMP/rc_re1")" = 0 ] && [ "$(cat "$TMP/rc_re2")" = 0 ] && [ $prc = 0 ]; then
+    pass "reentry: exit 0, $(tail -1 "$TMP/py_re")"
+else
+    fail "reentry" "exit $(cat "$TMP/rc_re1"): $(head -1 "$TMP/err_re1") $(tail -1 "$TMP/py_re")"
+fi
 sed 's/depth = 0.03 }/depth = 0.06 }/' "$TUT" >"$TMP/through.lua"
 outcome through "$TMP/through.lua" tip_exit '
 assert r["needle"]["depth_m"] > 0.059 and r["needle"]["path_cut_m"] < 0.055, r["needle"]

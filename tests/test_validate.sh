@@ -27,8 +27,8 @@ fail() {
 }
 
 GROUP1="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy
-rod-cantilever rod-buckling rod-twist rod-length rod-reparam friction-stick friction-slip
-friction-reversal puncture solver-agreement"
+rod-cantilever rod-buckling rod-twist rod-torsion rod-length rod-reparam friction-stick
+friction-slip friction-reversal twist-friction puncture solver-agreement"
 GROUP2="symmetric-straight remesh-restore remesh-substeps double-bend"
 ALL="$GROUP1 $GROUP2"
 case "$GROUP" in

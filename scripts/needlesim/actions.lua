@@ -180,8 +180,8 @@ end
 --- act.retract{speed, depth | to}: pull the needle back at `speed` [m/s] until its tip is `depth`
 -- [m] past the entry point, or back to the target named `to` (as act.insert's `to`: the target
 -- is ahead of the tip again). Without either the needle comes all the way out, and on until its
--- tip is CLEAR (2 mm) outside the entry point, so the skin settling back does not meet it
--- (re-entry is not modelled).
+-- tip is CLEAR (2 mm) outside the entry point, so the skin settling back does not meet it (a
+-- needle that goes in again enters afresh: sim/coupling_reentry.c).
 function act.retract(t)
     running()
     fields(t, "retract", { "speed", "depth", "to" })

@@ -1,0 +1,3 @@
+local sc = require("base").scenario()
+sc.needle.steering = "sideways"
+return sc
