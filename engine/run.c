@@ -235,6 +235,12 @@ int ns_run_build(NsRun *r, char *err, int err_sz)
     if (ns_scenario_tissue(sc, &tp, &r->tissue, err, err_sz))
         return -1;
     r->have_tissue = true;
+    /* The mesh as built: the first state min_dihedral_deg_any_step covers. */
+    if (ns_dihedral_watch_init(&r->dw, &r->tissue.mesh)) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    r->have_dw = true;
     char what[600];
     snprintf(what, sizeof what, "%s: ns.scenario: entry", sc->where);
     if (ns_run_place_needle(r, what, err, err_sz))
@@ -502,6 +508,11 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
         return -1;
     }
     r->steps++;
+    /* The mesh after the step, with what came before it (a needle's entry or exit). */
+    if (r->have_dw && ns_dihedral_watch_look(&r->dw, &r->tissue.mesh)) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
     if (ns_run_record_events(r, &st, (double)r->steps * sp->dt, ns_run_tip(r))) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
@@ -683,6 +694,8 @@ void ns_run_free(NsRun *r)
         ns_tissue_free(&r->tissue);
     if (r->have_orig)
         ns_mesh_free(&r->orig);
+    if (r->have_dw)
+        ns_dihedral_watch_free(&r->dw);
     if (r->have_spec)
         ns_run_spec_free(&r->spec);
     if (r->have_sc)

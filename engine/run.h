@@ -11,6 +11,7 @@
 #include "control_log.h"
 #include "coupling.h"
 #include "json.h"
+#include "quality_watch.h"
 #include "rod.h"
 #include "run_render.h"
 #include "run_spec.h"
@@ -69,6 +70,10 @@ typedef struct NsRun {
     long factorizations; /* of the tissue matrix, made or adopted (schur; the paper's needs none) */
     int consistent, nan, inverted, unconverged, lcp_unresolved;
     int repaired; /* tissue nodes moved by the remesher's repair (ns_remesh_repair) */
+    /* the tissue mesh's worst dihedral angle over every step, at rest and deformed
+     * (min_dihedral_deg_any_step, sim/quality_watch.h) */
+    NsDihedralWatch dw;
+    bool have_dw;
     double max_axial, last_axial, path_cut, wall_s, last_tip[3];
     NsMesh orig; /* the tissue's mesh as built: every needle's exit restores it */
     bool have_orig;

@@ -133,6 +133,10 @@ static int run_state_pack(NsPack *p, NsRun *r)
     NS_PACK(p, r->unconverged);
     NS_PACK(p, r->lcp_unresolved);
     NS_PACK(p, r->repaired);
+    /* The minima so far; the watch's copy is the mesh as built, which the next look compares
+     * with the resumed mesh (every tet changed since counted again: the same minimum). */
+    NS_PACK(p, r->dw.min_rest_deg);
+    NS_PACK(p, r->dw.min_world_deg);
     NS_PACK(p, r->max_axial);
     NS_PACK(p, r->last_axial);
     NS_PACK(p, r->path_cut);

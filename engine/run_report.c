@@ -167,6 +167,12 @@ static void report_solver(NsJson *j, NsRun *r)
     ns_json_number(j, q.max_dihedral_deg);
     ns_json_key(j, "remesh_repaired_nodes");
     ns_json_int(j, r->repaired);
+    /* The worst dihedral angle over every step of the run (sim/quality_watch.h): at rest, the
+     * remesher's quality (§3.4.1), and in the deformed tissue. */
+    ns_json_key(j, "min_dihedral_deg_any_step");
+    ns_json_number(j, r->dw.min_rest_deg);
+    ns_json_key(j, "min_dihedral_deg_any_step_deformed");
+    ns_json_number(j, r->dw.min_world_deg);
     ns_json_key(j, "tissue_energy_j"); /* kinetic + elastic, at the end */
     ns_json_number(j, ns_tissue_energy(&r->tissue));
     ns_json_end_object(j);

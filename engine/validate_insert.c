@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "mesh_grid.h"
+#include "quality_watch.h"
 #include "validate_insert.h"
 
 int vr_fail(NsValidateResult *r, const char *why)
@@ -147,6 +148,11 @@ int vr_insert(const Insertion *in, Run *run, NsValidateResult *r)
         return vr_fail(r, err);
     }
     int rc = 0;
+    NsDihedralWatch dw; /* from the mesh after the skin entry (gel_tissue) */
+    if (ns_dihedral_watch_init(&dw, M))
+        rc = vr_fail(r, "out of memory");
+    else if (getenv("NS_VALIDATE_TRACE"))
+        fprintf(stderr, "after the skin entry: worst dihedral %.2f deg\n", dw.min_rest_deg);
     /* The sleeve drives the needle in by `depth`; a twist pauses the insertion while the base
      * turns half a revolution (pause steps). */
     int pause = in->twist_at > 0.0 ? (int)ceil(M_PI / (in->twist_rate * in->dt) - 1e-9) : 0;
@@ -181,6 +187,10 @@ int vr_insert(const Insertion *in, Run *run, NsValidateResult *r)
         run->substeps += st.remesh_substeps;
         run->min_dihedral = fmin(run->min_dihedral, st.min_dihedral_deg);
         run->max_dihedral = fmax(run->max_dihedral, st.max_dihedral_deg);
+        if (ns_dihedral_watch_look(&dw, M)) {
+            rc = vr_fail(r, "out of memory");
+            break;
+        }
         if (ns_coupled_check_structure(&c, err, sizeof err)) {
             if (run->structure_failures++ == 0)
                 snprintf(run->first_failure, sizeof run->first_failure, "step %d: %.200s", k, err);
@@ -194,9 +204,12 @@ int vr_insert(const Insertion *in, Run *run, NsValidateResult *r)
                                                (xt[1] - xr[1]) * (xt[1] - xr[1]) +
                                                (xt[2] - xr[2]) * (xt[2] - xr[2])));
         if (getenv("NS_VALIDATE_TRACE"))
-            fprintf(stderr, "%4d tip %.3f %.3f %.3f mm remesh %d bevel force %.3f N\n", k,
-                    1e3 * rod.x[3 * (rod.nodes - 1)], 1e3 * rod.x[3 * (rod.nodes - 1) + 1],
-                    1e3 * rod.x[3 * (rod.nodes - 1) + 2], st.remesh_kind, st.bevel_force);
+            fprintf(stderr,
+                    "%4d tip %.3f %.3f %.3f mm remesh %d bevel force %.3f N dihedral %.2f "
+                    "(changed tets %.2f, repaired %d)\n",
+                    k, 1e3 * rod.x[3 * (rod.nodes - 1)], 1e3 * rod.x[3 * (rod.nodes - 1) + 1],
+                    1e3 * rod.x[3 * (rod.nodes - 1) + 2], st.remesh_kind, st.bevel_force,
+                    st.min_dihedral_deg, dw.last_rest_deg, st.remesh_repaired);
         run->steps = k + 1;
     }
     if (rc == 0 && run->twist_step >= 0) {
@@ -217,6 +230,9 @@ int vr_insert(const Insertion *in, Run *run, NsValidateResult *r)
             }
         }
     }
+    run->min_dihedral_any = dw.min_rest_deg;
+    run->min_dihedral_any_world = dw.min_world_deg;
+    ns_dihedral_watch_free(&dw);
     ns_coupled_free(&c);
     ns_rod_free(&rod);
     ns_tissue_free(&tissue);

@@ -111,6 +111,7 @@ static double fit_circle(const double *p, int n, double *rms, double *off)
 /* One model's bevel-arc runs: radius, RMS and out-of-plane distance per psi. */
 typedef struct ArcFits {
     double R[3], rms[3], off[3], worst_rel;
+    double any, any_world; /* min_dihedral_deg_any_step over the three runs (rest, deformed) */
     int failures, splits, snaps, went;
 } ArcFits;
 
@@ -120,6 +121,7 @@ static int bevel_arc_runs(NsBevelModel model, ArcFits *a, NsValidateResult *r)
     int rc = 0;
     memset(a, 0, sizeof *a);
     a->went = 1;
+    a->any = a->any_world = 180.0;
     for (int j = 0; j < 3 && rc == 0; j++) {
         Insertion in = vr_default_insertion();
         in.tip = NS_TIP_BEVEL;
@@ -144,6 +146,8 @@ static int bevel_arc_runs(NsBevelModel model, ArcFits *a, NsValidateResult *r)
             }
             a->went = a->went && walked >= 0.9 * in.depth && p1[2] > p0[2];
             a->failures += run.structure_failures;
+            a->any = fmin(a->any, run.min_dihedral_any);
+            a->any_world = fmin(a->any_world, run.min_dihedral_any_world);
             a->snaps += run.ops[1];
             a->splits += run.ops[2] + run.ops[3] + run.ops[4];
         }
@@ -175,7 +179,8 @@ static int bevel_arc(NsValidateResult *r)
         r->error = r->value;
         r->tolerance = 0.03;
         r->pass = r->value <= r->tolerance && inc_f && inc_a && f.went && a.went &&
-                  worst_k <= 0.15 && f.failures + a.failures == 0;
+                  worst_k <= 0.15 && f.failures + a.failures == 0 &&
+                  fmin(f.any, a.any) >= NS_MIN_DIHEDRAL_ANY_STEP_DEG;
         ns_validate_detail(
             r,
             "bevel nitinol needle (0.83 mm), no twist, 6 cm into the gel block at 20 mm/s, 10 ms "
@@ -184,13 +189,15 @@ static int bevel_arc(NsValidateResult *r)
             "%.3f mm, out of plane %.3f / %.3f / %.3f mm. Nonholonomic arc: radius %.1f / %.1f / "
             "%.1f mm (curvature %.2f / %.2f / %.2f 1/m, at most %.1f %% from k_c tan psi, want "
             "<= 15 %%), RMS %.3f / %.3f / %.3f mm, out of plane %.3f / %.3f / %.3f mm. %d "
-            "snaps, %d splits; structural failures %d",
+            "snaps, %d splits; min_dihedral_deg_any_step %.2f deg (force %.2f, arc %.2f; want "
+            ">= %.0f; deformed %.2f); structural failures %d",
             1e3 * f.R[0], 1e3 * f.R[1], 1e3 * f.R[2], 1.0 / f.R[0], 1.0 / f.R[1], 1.0 / f.R[2],
             1e3 * f.rms[0], 1e3 * f.rms[1], 1e3 * f.rms[2], 1e3 * f.off[0], 1e3 * f.off[1],
             1e3 * f.off[2], 1e3 * a.R[0], 1e3 * a.R[1], 1e3 * a.R[2], 1.0 / a.R[0], 1.0 / a.R[1],
             1.0 / a.R[2], 100.0 * worst_k, 1e3 * a.rms[0], 1e3 * a.rms[1], 1e3 * a.rms[2],
             1e3 * a.off[0], 1e3 * a.off[1], 1e3 * a.off[2], f.snaps + a.snaps, f.splits + a.splits,
-            f.failures + a.failures);
+            fmin(f.any, a.any), f.any, a.any, NS_MIN_DIHEDRAL_ANY_STEP_DEG,
+            fmin(f.any_world, a.any_world), f.failures + a.failures);
     }
     return rc;
 }
@@ -441,7 +448,8 @@ static int double_bend(NsValidateResult *r)
                a.rms <= 0.25e-3;
     r->pass = isfinite(a.sb) && fabs(a.sb) <= r->tolerance && arcs && a.kb * a.kl < 0.0 &&
               a.off <= 1e-3 && ap.off <= 1e-3 && ra.structure_failures == 0 &&
-              rf.structure_failures == 0;
+              rf.structure_failures == 0 &&
+              fmin(ra.min_dihedral_any, rf.min_dihedral_any) >= NS_MIN_DIHEDRAL_ANY_STEP_DEG;
     ns_validate_detail(
         r,
         "bevel 45 deg nitinol needle 6 cm into the gel block, the base turned 180 deg at 3 cm "
@@ -453,14 +461,18 @@ static int double_bend(NsValidateResult *r)
         "15 mm; out of plane %.3f mm (want <= 1 mm, and the path at the end too: %.3f mm). "
         "The needle's path at the end (reported): arcs join %.2f mm after the twist point, "
         "%.2f then %.2f 1/m, RMS %.3f mm. Remesh %d snaps, %d edge, %d face, %d tet splits; "
-        "dihedral angles near the needle in [%.1f, %.1f] deg. Bevel force model (reported), "
+        "dihedral angles near the needle in [%.1f, %.1f] deg; min_dihedral_deg_any_step %.2f deg "
+        "(arc %.2f, force %.2f; want >= %.0f; deformed %.2f). Bevel force model (reported), "
         "trajectory: arcs join %.2f mm after the twist point, curvature %.2f then %.2f 1/m, "
         "RMS %.3f mm, out of plane %.3f mm; path at the end: join %.2f mm, %.2f then %.2f "
         "1/m. Structural failures %d%s%s",
         1e3 * a.sb, a.k1, a.k2, kn, 1e3 * a.rms, a.kb, a.kl, 1e3 * a.off, 1e3 * ap.off, 1e3 * ap.sb,
         ap.k1, ap.k2, 1e3 * ap.rms, ra.ops[1], ra.ops[2], ra.ops[3], ra.ops[4], ra.min_dihedral,
-        ra.max_dihedral, 1e3 * f.sb, f.k1, f.k2, 1e3 * f.rms, 1e3 * f.off, 1e3 * fp.sb, fp.k1,
-        fp.k2, ra.structure_failures + rf.structure_failures,
+        ra.max_dihedral, fmin(ra.min_dihedral_any, rf.min_dihedral_any), ra.min_dihedral_any,
+        rf.min_dihedral_any, NS_MIN_DIHEDRAL_ANY_STEP_DEG,
+        fmin(ra.min_dihedral_any_world, rf.min_dihedral_any_world), 1e3 * f.sb, f.k1, f.k2,
+        1e3 * f.rms, 1e3 * f.off, 1e3 * fp.sb, fp.k1, fp.k2,
+        ra.structure_failures + rf.structure_failures,
         ra.structure_failures + rf.structure_failures ? ": " : "",
         ra.structure_failures ? ra.first_failure : rf.first_failure);
     return 0;

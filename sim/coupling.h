@@ -180,8 +180,12 @@ typedef struct NsCoupled {
     int remesh_hint;            /* a tet near the tip, where point location starts */
     int path_cap;               /* entries allocated in path.node and path.s */
     int outside;                /* params.remesh: the needle was withdrawn out of the tissue */
-    double heading[3];          /* NS_BEVEL_ARC: the cut's unit heading in material space */
-    int heading_valid;          /* 0: taken from the needle's tip tangent when it next cuts */
+    /* outside: how deep the tip still was as the needle left (material space, along its track)
+     * [m]: it leaves with its tip up to that far in (coupling_tip.c, EXIT_MARGIN), and re-enters
+     * only once pushed deeper (coupling_reentry.c) */
+    double exit_depth;
+    double heading[3]; /* NS_BEVEL_ARC: the cut's unit heading in material space */
+    int heading_valid; /* 0: taken from the needle's tip tangent when it next cuts */
     /* params.remesh: the tip rests on a rigid region (bone): a commanded insertion is not fed
      * through the sleeve (it slips) until the needle is withdrawn (v_insert < 0) */
     int tip_blocked;

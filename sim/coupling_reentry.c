@@ -66,7 +66,10 @@ int coupled_reenter(NsCoupled *c, NsCouplingStats *st)
         return 0;
     material_of(M, t, b, ut);
     double d[3], len = dist3(ut, a), h = ns_mesh_mean_edge(M);
-    if (!(len > REENTRY_MIN * h))
+    /* A needle still drawn out (or held) whose tip is no deeper than it was as the needle left
+     * (it leaves a little way inside, coupling_tip.c, EXIT_MARGIN) is not pushed in: that is the
+     * withdrawal's tail. Pushed in (v_insert > 0), or deeper, it enters afresh. */
+    if (!(len > REENTRY_MIN * h) || (!(r->v_insert > 0.0) && !(len > c->exit_depth)))
         return 0;
     for (int i = 0; i < 3; i++)
         d[i] = (ut[i] - a[i]) / len;

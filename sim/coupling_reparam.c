@@ -21,7 +21,8 @@ static double norm3(const double *a)
 }
 
 /* Outside the tissue: nothing is coupled (a needle pushed back in enters afresh in the tip's
- * cut, coupling_reentry.c; one whose tip is not yet a thousandth of an element in waits). Free
+ * cut, coupling_reentry.c; one whose tip is not yet deeper than it was as it left, nor a
+ * fiftieth of an element in, waits). Free
  * of the tissue, the rod still splits and merges its edges: a retraction shortens the edge at
  * the sleeve, which must merge with the next to go on. */
 static int reparameterize_free(NsCoupled *c, NsCouplingStats *st)

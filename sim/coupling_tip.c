@@ -44,6 +44,10 @@ static void tip_dihedrals(const NsCoupled *c, NsCouplingStats *st)
     }
 }
 
+/* A needle drawn back leaves the tissue once its tip is within this fraction of the entry
+ * node's mean edge from it (tip_target). */
+#define EXIT_MARGIN 0.25
+
 /* A fresh heading for the arc model: the cut's direction at the tip in material space, the
  * chord from the tip's node back along the path to the first node at least the mean length of
  * the tip node's edges away (or the path's start). The world tangent of the rod's last edge is
@@ -275,19 +279,33 @@ static int tip_target(NsCoupled *c, NsCouplingStats *st, TipCut *m)
     for (int k = 0; k < 4 && t >= 0 && !m->exiting; k++)
         for (int i = 0; i < 3; i++)
             u_new[i] += b[k] * M->u[3 * M->tet_node[4 * t + k] + i];
-    /* Withdrawn: a retracting tip behind the entry node, or outside the tissue (a retracting
-     * needle goes back along its own track, so it left through its entry, in one step when the
-     * step draws it back further than its remaining depth). */
+    /* Withdrawn: a retracting tip outside the tissue (a retracting needle goes back along its
+     * own track, so it left through its entry, in one step when the step draws it back further
+     * than its remaining depth), or, its path down to the skin entry's two nodes, within
+     * EXIT_MARGIN of the entry node's mean edge of it along the track (ours, issue 35): the last
+     * node the tip drags towards the entry node makes tets with it and its star's far edges
+     * whose dihedral angles shrink with the distance between the two (2.8 deg at a twelfth of an
+     * element in remesh-cycles), the exit's counterpart of the skin entry's short edge
+     * (remesh_entry.c). The tip, then that little way inside, is free; pushed in again deeper
+     * than that, it enters afresh (coupling_reentry.c). */
     if (!retracting || (t >= 0 && p->count != 2))
         return 0;
+    int en = p->node[0];
+    double along = 0.0;
     if (t >= 0) {
-        const double *ue = M->u + 3 * p->node[0], *ut = M->u + 3 * tipn;
-        double along = 0.0;
-        for (int i = 0; i < 3; i++)
+        const double *ue = M->u + 3 * en, *ut = M->u + 3 * tipn;
+        double track = 0.0;
+        for (int i = 0; i < 3; i++) {
             along += (u_new[i] - ue[i]) * (ut[i] - ue[i]);
-        if (!(along <= 0.0))
+            track += (ut[i] - ue[i]) * (ut[i] - ue[i]);
+        }
+        along = track > 0.0 ? along / sqrt(track) : 0.0; /* the tip's depth along the track [m] */
+        if (!(along <= EXIT_MARGIN * node_edge_mean(M, en)))
             return 0;
     }
+    /* How deep the tip still is as it leaves (material space): coupled_reenter waits until the
+     * needle is pushed deeper than that. */
+    c->exit_depth = t >= 0 ? fmax(along, 0.0) : 0.0;
     /* Algorithm 2 should have undone every split but the one that made the tip's node (undoing
      * that one is the retraction's own last step). */
     st->exit_undone =

@@ -411,9 +411,10 @@ typedef struct Applied {
 } Applied;
 
 /* Applies candidate c for u_new (the caller checks the result); returns 0 or -1 (not
- * applicable: the mesh is then as before). */
+ * applicable: the mesh is then as before). xva: the world state (x, v, a) at u_new in the mesh
+ * before the operation, which the placed node takes. */
 static int apply(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Candidate *c,
-                 const double u_new[3], Applied *ap)
+                 const double u_new[3], const double xva[9], Applied *ap)
 {
     memset(ap, 0, sizeof *ap);
     ap->snap.n = ap->moved.n = ap->released.n = ap->undone_node.n = -1;
@@ -447,6 +448,11 @@ static int apply(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Cand
         ap->pushed = 1;
     }
     ap->placed = placed;
+    /* The placed node's world state is that of u_new in the mesh before the operation (with the
+     * tip's node). An undo (lines 6-8) removes the tip's node first, so the split would take it
+     * from the tets around the undone node instead, the tissue away from the needle: the tip
+     * jumped sideways to their interpolated displacement (0.2-0.7 mm in double-bend). */
+    remesh_set_node(m, placed, u_new, xva, xva + 3, xva + 6);
     if (c->release) {
         /* u1 leaves the needle and moves freely (line 10): to the best place for its tets. */
         node_save(m, tip->u1, &ap->released);
@@ -657,7 +663,8 @@ static int tip_region(const NsMesh *m, const NsRemeshTip *tip, int t, const int 
  * scratch; qbest holds the best's vector. Counts res->candidates. Returns the best, or -1. */
 static int best_candidate(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip,
                           const Candidate *cand, int nc, const int *rn, int nrn,
-                          const double u_new[3], double *qbest, double *qcur, NsRemeshResult *res)
+                          const double u_new[3], const double xva[9], double *qbest, double *qcur,
+                          NsRemeshResult *res)
 {
     int best = -1, nbest = 0;
     double dbest = 0.0, floor_deg = tip->dihedral_floor_deg;
@@ -667,7 +674,7 @@ static int best_candidate(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip,
         if (breaks_chain(tip, c))
             continue;
         Applied ap;
-        if (apply(m, s, tip, c, u_new, &ap))
+        if (apply(m, s, tip, c, u_new, xva, &ap))
             continue;
         int ok = 1;
         /* Connectivity of the needle's chain. */
@@ -753,12 +760,14 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
         snprintf(err, (size_t)err_sz, "remesh: the needle's tip nodes are not alive");
         return -1;
     }
-    int t = ns_mesh_locate(m, u_new, tip->hint_tet, 1e-9, NULL);
+    double bt[4], xva[9];
+    int t = ns_mesh_locate(m, u_new, tip->hint_tet, 1e-9, bt);
     if (t < 0) {
         snprintf(err, (size_t)err_sz, "remesh: the tip (%.4g, %.4g, %.4g) m is outside the tissue",
                  u_new[0], u_new[1], u_new[2]);
         return -1;
     }
+    remesh_interp_state(m, t, bt, xva, xva + 3, xva + 6);
     int top_made_u1 = s->count > 0 && s->ops[s->count - 1].node == u1;
     Candidate cand[64];
     int undo_nodes[4] = {-1, -1, -1, -1};
@@ -770,7 +779,7 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
         return -1;
     }
     double *qcur = qbest + 2 * REGION_CAP;
-    int best = best_candidate(m, s, tip, cand, nc, rn, nrn, u_new, qbest, qcur, res);
+    int best = best_candidate(m, s, tip, cand, nc, rn, nrn, u_new, xva, qbest, qcur, res);
     if (best < 0) {
         free(qbest);
         snprintf(err, (size_t)err_sz,
@@ -780,7 +789,7 @@ int ns_remesh_tip(NsMesh *m, NsRemeshStack *s, NsRemeshTip *tip, const double u_
     }
     Applied ap;
     const Candidate *c = &cand[best];
-    if (apply(m, s, tip, c, u_new, &ap)) {
+    if (apply(m, s, tip, c, u_new, xva, &ap)) {
         free(qbest);
         snprintf(err, (size_t)err_sz, "remesh: the chosen operation failed");
         return -1;

@@ -111,9 +111,12 @@ void ns_remesh_forget_original(NsRemeshStack *s, int n);
  * the tissue's surface, along direction d. The entry node is made at a (a free surface node of
  * the tet there within 0.75 of its shortest edge, its surrounding surface flat within about 5
  * degrees, snapped there; else the surface face or edge split at a), then the tip node at depth
- * along d (the simplex containing it split there; the depth halved while that point lies beyond
- * the entry node's tets), joined to the entry node by an edge: the short edge at the skin. The
- * splits are pushed on s and the snap recorded, so that undoing s and releasing its records
+ * along d (the simplex containing it split there), joined to the entry node by an edge: the
+ * short edge at the skin. Ours (issue 35): depth is the least depth; deeper ones, up to half the
+ * entry node's mean edge, are taken where the tip node's tets would otherwise have dihedral
+ * angles under 12 deg, and then the repair (ns_remesh_repair) moves free nodes of the entry's
+ * tets; where the point at depth lies beyond the entry node's tets, the depth is halved. The
+ * splits are pushed on s and the snaps recorded, so that undoing s and releasing its records
  * restores the mesh. nodes[0]: the entry node, nodes[1]: the tip node. Returns 0, or -1 with a
  * message (a not on the surface, d not into the tissue there, or no valid split), the mesh and
  * s then as they were. */

@@ -3,8 +3,10 @@
  * nearby surface node snapped there, or the surface face or edge split there), and the tip node
  * just inside it, a short edge away (the split of the simplex containing it). From then on
  * Algorithm 2 (remesh.c) moves the tip; the paper's "very short edge connecting the needle tip to
- * the mesh surface, with flat tetrahedra adjoining it" is the edge made here, and it lengthens as
- * the tip node is snapped deeper in the next steps. Both splits go on the needle's undo stack,
+ * the mesh surface, with flat tetrahedra adjoining it" is the edge made here. Ours (issue 35):
+ * the edge is made long enough (up to half an element) that the tets adjoining it are not flat
+ * (dihedral angles of 12 deg or more where the depth allows, then repaired), since every step's
+ * mesh counts (min_dihedral_deg_any_step). Both splits go on the needle's undo stack,
  * and the snap is recorded, so that the needle's exit gives back the original mesh. */
 #include "remesh.h"
 
@@ -21,6 +23,13 @@
 #define ENTRY_ON 1e-6
 /* A snap may not bring an incident tet's quality below this (unless it was lower already). */
 #define ENTRY_MIN_QUALITY 0.05
+/* The tip node's tets should reach this worst dihedral angle [deg] (the remesher's default
+ * floor, NsCouplingParams.remesh_dihedral_floor). */
+#define ENTRY_DIHEDRAL_DEG 12.0
+/* The depths tried for the tip node, as multiples of the depth asked, while within
+ * ENTRY_DEPTH_CAP of the entry node's mean edge. */
+static const double entry_grow[] = {1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0};
+#define ENTRY_DEPTH_CAP 0.5
 
 /* Unit outward normal of face f (opposite node f) of tet t in material space; 0 if degenerate. */
 static int face_normal(const NsMesh *m, int t, int f, double n[3])
@@ -131,6 +140,44 @@ static int flat_around(const NsMesh *m, int n, const double fn[3])
     return 1;
 }
 
+/* The mean length of node n's edges (each counted once per tet) [m]. */
+static double mean_edge(const NsMesh *m, int n)
+{
+    double h = 0.0;
+    int ne = 0;
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++)
+        for (int k = 0; k < 4; k++) {
+            int o = m->tet_node[4 * l->items[i] + k];
+            if (o != n) {
+                h += dist(m->u + 3 * n, m->u + 3 * o);
+                ne++;
+            }
+        }
+    return ne ? h / ne : 0.0;
+}
+
+static int remesh_has(const int *list, int n, int v)
+{
+    for (int i = 0; i < n; i++)
+        if (list[i] == v)
+            return 1;
+    return 0;
+}
+
+/* The worst dihedral angle of node n's tets in material space [deg]. */
+static double node_min_dihedral(const NsMesh *m, int n)
+{
+    double lo = 180.0;
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++) {
+        const int *tn = m->tet_node + 4 * l->items[i];
+        lo = fmin(lo, ns_tet_min_dihedral(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2],
+                                          m->u + 3 * tn[3]));
+    }
+    return lo;
+}
+
 /* A node at material point p in tet t (barycentric b): the simplex of the nodes with weight
  * above ENTRY_ON is split at p (an edge, a face or the tet), or, if p is at a node, that node.
  * Returns the node, or -1. */
@@ -217,10 +264,43 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
         return -1;
     }
     /* From here a failure undoes the splits and the snap: the mesh is left as it was. */
-    /* 2. The tip node, depth along the direction: the simplex containing it split there. If
-     *    that point lies beyond the entry node's tets (its new node would not be joined to the
-     *    entry node), the depth is halved, down to a thousandth of the one asked for. */
+    /* 2. The tip node along the direction: the simplex containing it split there, the point
+     *    inside one of the entry node's tets (so that the new node is joined to the entry node).
+     *    Ours (issue 35): a node at depth e below the entry node makes tets with the entry node
+     *    and two far nodes of its star, whose dihedral angle at the far edge is about e / h (h
+     *    the element size): 0.6 deg at the tenth of an element the callers ask for. So the depth
+     *    asked is the least one: the deeper ones of entry_grow, up to ENTRY_DEPTH_CAP of the
+     *    entry node's mean edge, are tried in turn (each split made, measured and undone), and
+     *    the first whose tip node's tets reach ENTRY_DIHEDRAL_DEG is taken, else the best. Where
+     *    no depth lies inside the entry node's tets, the depth is halved instead, down to a
+     *    thousandth of the one asked for, as long as a point inside them is found. */
     int tip = -1;
+    double cap = ENTRY_DEPTH_CAP * mean_edge(m, entry), best_deg = -1.0, best_depth = 0.0;
+    for (int g = 0; g < (int)(sizeof entry_grow / sizeof entry_grow[0]); g++) {
+        double dg = depth * entry_grow[g], p[3];
+        if (g > 0 && dg > cap)
+            break;
+        for (int i = 0; i < 3; i++)
+            p[i] = m->u[3 * entry + i] + dg * u[i];
+        int tt = ns_mesh_locate(m, p, m->node_tets[entry].items[0], ENTRY_ON, b);
+        int inside = 0;
+        for (int j = 0; tt >= 0 && j < 4; j++)
+            inside |= m->tet_node[4 * tt + j] == entry && b[j] <= 1.0 - ENTRY_ON;
+        int before = s->count, n = inside ? node_at(m, s, tt, b, p) : -1;
+        if (n < 0)
+            continue;
+        double deg = n != entry && ns_remesh_joined(m, entry, n) ? node_min_dihedral(m, n) : -1.0;
+        if (s->count > before)
+            ns_remesh_undo(m, s);
+        if (deg > best_deg) {
+            best_deg = deg;
+            best_depth = dg;
+        }
+        if (deg >= ENTRY_DIHEDRAL_DEG)
+            break;
+    }
+    if (best_deg >= 0.0)
+        depth = best_depth;
     for (int halvings = 0; halvings <= 10 && tip < 0; halvings++, depth *= 0.5) {
         double p[3];
         for (int i = 0; i < 3; i++)
@@ -241,6 +321,19 @@ int ns_remesh_skin_entry(NsMesh *m, NsRemeshStack *s, const double a[3], const d
         ns_set_err(err, err_sz,
                    "no tip node could be made inside the entry point, joined to it by an edge");
         return -1;
+    }
+    /* Where the tip node's tets are still below the floor, the repair (remesh_repair.c) moves
+     * the free nodes of the entry's tets, the entry and tip nodes held: the flat tets that the
+     * entry node's snap along the surface left in its star. Its moves are snaps, recorded. */
+    const NsIntList *le = &m->node_tets[entry], *lt = &m->node_tets[tip];
+    if (node_min_dihedral(m, tip) < ENTRY_DIHEDRAL_DEG && le->count + lt->count <= 256) {
+        int tets[256], nt = 0, pin[2] = {entry, tip};
+        for (int i = 0; i < le->count; i++)
+            tets[nt++] = le->items[i];
+        for (int i = 0; i < lt->count; i++)
+            if (!remesh_has(tets, nt, lt->items[i]))
+                tets[nt++] = lt->items[i];
+        ns_remesh_repair(m, s, tets, nt, pin, 2, ENTRY_DIHEDRAL_DEG);
     }
     nodes[0] = entry;
     nodes[1] = tip;

@@ -22,6 +22,13 @@
  * remeshing results, 160 deg (§3.4.1; docs/validation.md, remesh-cycles), as the floor's 12 deg
  * sits inside its 10.3. Aimed at 160 itself, the largest reached 160.0 in remesh-cycles. */
 #define LARGEST_DEG 155.0
+/* Past BOUND_DEG, a degree inside the paper's 160 deg, a tet scores below BAR_DEG, the smallest
+ * angle the validation cases allow (NS_MIN_DIHEDRAL_ANY_STEP_DEG, 5 deg): the repair does not
+ * trade a tet's smallest angle for a largest one near or past 160 deg. Scaled from LARGEST_DEG
+ * alone, 160.95 deg scored 9.14 deg, and the skin entry's repair in remesh-cycles lifted a 7.73 deg
+ * tet to 9.14 deg by making that cap. */
+#define BOUND_DEG 159.0
+#define BAR_DEG   5.0
 
 /* The repair starts only where a tet scores this far below the floor [deg], and then lifts to
  * the floor: a rescue for the steps where the choice could not hold the floor, not a smoother
@@ -36,7 +43,10 @@ static double tet_score(const NsMesh *m, const int *tn, double floor_deg)
 {
     double hi, lo = ns_tet_dihedral_range(m->u + 3 * tn[0], m->u + 3 * tn[1], m->u + 3 * tn[2],
                                           m->u + 3 * tn[3], &hi);
-    return fmin(fmin(lo, floor_deg * (180.0 - hi) / (180.0 - LARGEST_DEG)), floor_deg);
+    double cap = floor_deg * (180.0 - hi) / (180.0 - LARGEST_DEG);
+    if (hi > BOUND_DEG) /* past the bound: worse than a tet at the smallest angle's bar */
+        cap = fmin(cap, BAR_DEG * (180.0 - hi) / (180.0 - BOUND_DEG));
+    return fmin(fmin(lo, cap), floor_deg);
 }
 
 /* Node n's tets' worst angle score (d) and worst quality (q); q <= 0 (or NaN) marks a flat or

@@ -1,6 +1,11 @@
 /* Tests for sim/quality.c: the quality measure and dihedral angles on tets with known answers;
- * the one-acos minimum against the six angles. */
+ * the one-acos minimum against the six angles; sim/quality_watch.c against full scans. */
+#include <string.h>
+
 #include "quality.h"
+#include "mesh_grid.h"
+#include "quality_watch.h"
+#include "remesh.h"
 #include "ns_test.h"
 
 static int regular_tet(void)
@@ -123,5 +128,69 @@ static int min_dihedral_matches(void)
     return 0;
 }
 
+/* ns_dihedral_watch (min_dihedral_deg_any_step) gives, bit for bit, the running minimum of a
+ * full scan of every state it is shown: a grid block whose interior nodes move at rest and in the
+ * world, and whose tets are split and the splits undone, in a random sequence (each state's
+ * full scan, ns_mesh_min_dihedral, the reference). */
+static int watch_matches_full_scans(void)
+{
+    NsMesh m;
+    const double lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
+    char err[256];
+    ENSURE(ns_mesh_grid_box(&m, lo, hi, 4, 4, 4, 0, err, sizeof err) == 0);
+    NsRemeshStack st;
+    ns_remesh_stack_init(&st);
+    NsDihedralWatch w;
+    ENSURE(ns_dihedral_watch_init(&w, &m) == 0);
+    double want_rest = ns_mesh_min_dihedral(&m, false), want_world = ns_mesh_min_dihedral(&m, true);
+    ENSURE(ns_same_bits(&w.min_rest_deg, &want_rest, 1));
+    unsigned seed = 11u;
+    int splits = 0, moves = 0, undos = 0;
+    for (int k = 0; k < 300; k++) {
+        seed = seed * 1664525u + 1013904223u;
+        int what = (int)(seed >> 28) % 4, n = (int)((seed >> 8) % (unsigned)m.node_slots);
+        if (what == 0 && ns_mesh_node_alive(&m, n) && !ns_remesh_node_on_boundary(&m, n)) {
+            /* a small move at rest (kept only if every tet stays positive) */
+            double save[3];
+            memcpy(save, m.u + 3 * n, sizeof save);
+            for (int c = 0; c < 3; c++)
+                m.u[3 * n + c] += 0.02 * ((double)((seed >> (4 * c)) & 15u) / 15.0 - 0.5);
+            if (ns_remesh_node_quality(&m, n) <= 0.0)
+                memcpy(m.u + 3 * n, save, sizeof save);
+            else
+                moves++;
+        } else if (what == 1) { /* split a tet at its centroid */
+            int t = (int)((seed >> 4) % (unsigned)m.tet_slots);
+            if (ns_mesh_tet_alive(&m, t)) {
+                double c[3] = {0, 0, 0};
+                int simplex[4]; /* a copy: the split rewrites the tet's slot */
+                memcpy(simplex, m.tet_node + 4 * t, sizeof simplex);
+                for (int v = 0; v < 4; v++)
+                    for (int i = 0; i < 3; i++)
+                        c[i] += 0.25 * m.u[3 * simplex[v] + i];
+                if (ns_remesh_split(&m, &st, simplex, 4, c) >= 0)
+                    splits++;
+            }
+        } else if (what == 2 && st.count > 0) {
+            undos += ns_remesh_undo(&m, &st) == 0; /* (refused after some moves: no matter) */
+        } else if (ns_mesh_node_alive(&m, n)) {    /* the world moves */
+            m.x[3 * n + (k % 3)] += 0.03 * ((double)((seed >> 12) & 255u) / 255.0 - 0.5);
+        }
+        ENSURE(ns_dihedral_watch_look(&w, &m) == 0);
+        want_rest = fmin(want_rest, ns_mesh_min_dihedral(&m, false));
+        want_world = fmin(want_world, ns_mesh_min_dihedral(&m, true));
+        ENSURE(ns_same_bits(&w.min_rest_deg, &want_rest, 1));
+        ENSURE(ns_same_bits(&w.min_world_deg, &want_world, 1));
+    }
+    ENSURE(splits > 5 && moves > 5 && undos > 5 && want_rest < 40.0);
+    printf("  %d splits, %d undone, %d moves: worst at rest %.3f deg, in the world %.3f deg\n",
+           splits, undos, moves, want_rest, want_world);
+    ns_dihedral_watch_free(&w);
+    ns_remesh_stack_free(&st);
+    ns_mesh_free(&m);
+    return 0;
+}
+
 NS_TEST_MAIN({"regular_tet", regular_tet}, {"corner_tet", corner_tet}, {"flat_tet", flat_tet},
-             {"mesh_stats", mesh_stats}, {"min_dihedral_matches", min_dihedral_matches})
+             {"mesh_stats", mesh_stats}, {"min_dihedral_matches", min_dihedral_matches},
+             {"watch_matches_full_scans", watch_matches_full_scans})

@@ -537,7 +537,19 @@ static int skin_entry_and_undo(void)
         for (int c = 0; c < 3; c++)
             ENSURE(fabs(e[c] - p[c]) < 1e-15);
         ENSURE(fabs(t[0] - e[0]) < 1e-15 && fabs(t[1] - e[1]) < 1e-15);
-        ENSURE(t[2] > 0.0 && t[2] <= 0.1 * H + 1e-15);
+        /* the depth asked, deeper where that keeps the tip's tets from flat dihedral angles (up
+         * to half the entry node's mean edge), shallower where it lies beyond the entry node's
+         * tets */
+        ENSURE(t[2] > 0.0 && t[2] <= H);
+        double worst = 180.0;
+        for (int i = 0; i < m.node_tets[nodes[1]].count; i++) {
+            const int *tn = m.tet_node + 4 * m.node_tets[nodes[1]].items[i];
+            worst = fmin(worst, ns_tet_min_dihedral(m.u + 3 * tn[0], m.u + 3 * tn[1],
+                                                    m.u + 3 * tn[2], m.u + 3 * tn[3]));
+        }
+        /* (k = 3: the surface nodes fixed, the entry a surface face split whose tets hold the
+         * tip only down to 0.05 H: 3.2 deg, no deeper point joined to the entry node) */
+        ENSURE(k == 3 || worst >= 5.0);
         ENSURE(ns_mesh_validate(&m, err, sizeof err) == 0);
         for (int i = 0; i < m.tet_slots; i++)
             if (ns_mesh_tet_alive(&m, i)) {
@@ -547,7 +559,8 @@ static int skin_entry_and_undo(void)
             }
         int chain[2] = {nodes[1], nodes[0]};
         ENSURE(structure_ok(&m, chain, 2));
-        printf("  entry %d: %d split(s)\n", k, s.count);
+        printf("  entry %d: %d split(s), tip %.2f H deep, its tets' worst dihedral %.1f deg\n", k,
+               s.count, t[2] / H, worst);
         while (s.count > 0)
             ENSURE(ns_remesh_undo(&m, &s) == 0);
         ns_remesh_release_all(&m, &s);

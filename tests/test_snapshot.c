@@ -216,9 +216,10 @@ static int restored_steps_to(const NsWorldSnapshot *s, int m, double v, double d
     return 0;
 }
 
-/* In 12 steps of 0.2 mm the tip has split the tissue (the split on the stack); the next 30
+/* In 32 steps of 0.2 mm the tip has split the tissue (the split on the stack; the skin entry's
+ * tip node starts about half an element in and snaps its way on before it needs one); the next 30
  * undo it, split again and snap. */
-enum { N_IN = 12, M_MORE = 30 };
+enum { N_IN = 32, M_MORE = 30 };
 #define SPEED 0.02
 #define DT    0.01
 
