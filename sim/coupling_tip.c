@@ -500,7 +500,8 @@ static int cut_pieces(NsCoupled *c, NsCouplingStats *st, const TipCut *m, int *c
                            penetrating,
                            m->exiting && sub == K,
                            hint,
-                           c->params.remesh_dihedral_floor};
+                           c->params.remesh_dihedral_floor,
+                           m->arc};
         rc = ns_remesh_tip(M, &c->remesh, &tip, us, &res, err, sizeof err);
         if (rc != 0 && (m->stopped || m->exiting)) {
             /* Next to bone or at the surface no operation may place the tip there: it stays

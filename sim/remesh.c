@@ -410,6 +410,24 @@ typedef struct Applied {
     double top_u[3];
 } Applied;
 
+/* Gives node n (just placed at its material position) the world state xva (x, v, a) unless
+ * one of its tets would be inverted in the world with it; then n keeps the state it has. */
+static void keep_world_state(NsMesh *m, int n, const double xva[9])
+{
+    NodeSave was;
+    node_save(m, n, &was);
+    remesh_set_node(m, n, was.u, xva, xva + 3, xva + 6);
+    const NsIntList *l = &m->node_tets[n];
+    for (int i = 0; i < l->count; i++) {
+        const int *tn = m->tet_node + 4 * l->items[i];
+        if (!(ns_tet_volume(m->x + 3 * tn[0], m->x + 3 * tn[1], m->x + 3 * tn[2],
+                            m->x + 3 * tn[3]) > 0.0)) {
+            node_restore(m, &was);
+            return;
+        }
+    }
+}
+
 /* Applies candidate c for u_new (the caller checks the result); returns 0 or -1 (not
  * applicable: the mesh is then as before). xva: the world state (x, v, a) at u_new in the mesh
  * before the operation, which the placed node takes. */
@@ -448,11 +466,14 @@ static int apply(NsMesh *m, NsRemeshStack *s, const NsRemeshTip *tip, const Cand
         ap->pushed = 1;
     }
     ap->placed = placed;
-    /* The placed node's world state is that of u_new in the mesh before the operation (with the
-     * tip's node). An undo (lines 6-8) removes the tip's node first, so the split would take it
-     * from the tets around the undone node instead, the tissue away from the needle: the tip
-     * jumped sideways to their interpolated displacement (0.2-0.7 mm in double-bend). */
-    remesh_set_node(m, placed, u_new, xva, xva + 3, xva + 6);
+    /* After an undo (lines 6-8), where the tip asks for it, the placed node takes the world
+     * state of u_new in the mesh before the operation (with the tip's node): the undo removes
+     * the tip's node first, so the split would take it from the tets around the undone node, the
+     * tissue away from the needle, and the tip jumped sideways to their interpolated
+     * displacement (0.2-0.7 mm in double-bend). Without an undo the operation interpolates in
+     * that same mesh. */
+    if (ap->undone && tip->undo_keeps_world)
+        keep_world_state(m, placed, xva);
     if (c->release) {
         /* u1 leaves the needle and moves freely (line 10): to the best place for its tets. */
         node_save(m, tip->u1, &ap->released);

@@ -136,6 +136,12 @@ typedef struct NsRemeshTip {
      * dihedral angle clipped at this floor [deg], then by the sorted quality vector; 0: by the
      * quality vector alone, as in the paper */
     double dihedral_floor_deg;
+    /* After an undo (lines 6-8) the node placed at u_new takes u_new's world state from the mesh
+     * before the undo, with the tip's node (the nonholonomic arc model sets it: without it the
+     * tip's world path jumped sideways at undo steps in double-bend); false: from the mesh after
+     * the undo, the tissue around the undone node, which relaxes the tip's displacement (bone
+     * contact depends on that: docs/remeshing.md, "The placed node's world state") */
+    bool undo_keeps_world;
 } NsRemeshTip;
 
 typedef struct NsRemeshResult {
