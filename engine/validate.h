@@ -17,7 +17,7 @@ typedef struct NsValidateResult {
     double error;     /* the compared quantity (usually |value - reference| / |reference|) */
     double tolerance; /* pass when error <= tolerance (and every side condition holds) */
     bool pass;
-    char detail[1536]; /* one line: resolutions, counts, side conditions (may be empty) */
+    char detail[2560]; /* one line: resolutions, counts, side conditions (may be empty) */
 } NsValidateResult;
 
 typedef struct NsValidateCase {

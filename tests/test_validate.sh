@@ -37,8 +37,9 @@ case "$GROUP" in
 *) CASES=$ALL ;;
 esac
 # Cases whose bar is not met yet: listed by --list and runnable, not required to pass here. Not
-# a way to hide a failure: a case moves up to CASES when it passes. (None now.)
-NOT_MET=""
+# a way to hide a failure: a case moves up to CASES when it passes. double-bend-entries: two
+# of its seven entries put the joint 5.1 mm after the twist point (docs/validation.md).
+NOT_MET="double-bend-entries"
 # Passing cases run by their own meson tests (tests/meson.build: validate-cycles, ~4 min, and
 # validate-steering, bevel-arc's six insertions, ~80 s), so that they run beside this one; they
 # are not defined in the sanitizer build (~20 and ~8 min there), whose remeshing and steering
