@@ -180,6 +180,9 @@ int ns_run_place_needle(NsRun *r, const char *what, char *err, int err_sz)
     if (sp->steering == NS_BEVEL_ARC)
         for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
             cp.bevel_curvature[k] = sp->arc_curvature;
+    if (sp->steering == NS_BEVEL_FORCE) /* needle.bevel_force */
+        for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++)
+            cp.bevel_force[k] = sp->bevel_force;
     /* One friction per unit length for the whole needle: that of the region at the entry. */
     int t0 = M->node_tets[nodes[0]].items[0];
     cp.f_perlen = sc->regions[M->tet_region[t0]].material.friction;

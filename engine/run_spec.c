@@ -346,6 +346,9 @@ static int check_spec(const NsScenario *sc, const NsRunSpec *s, char *err, int e
                    "needle.bevel_deg must be in [1, 89] and curvature in [0, 1000] 1/m (got %g "
                    "and %g)",
                    s->bevel_deg, s->arc_curvature);
+    if (!in_range(s->bevel_force, 0.0, NS_LIMIT_BEVEL_FORCE))
+        return bad(err, err_sz, w, "needle.bevel_force must be in [0, %g] N (got %g)",
+                   NS_LIMIT_BEVEL_FORCE, s->bevel_force);
     if (!finite3(s->entry_point))
         return bad(err, err_sz, w, "entry.point must be {x, y, z}: three finite numbers [m]");
     if (!nonzero3(s->entry_dir))
@@ -462,6 +465,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
                                                               : -1;
         free(steer);
         spec->arc_curvature = num_field(L, ni, "curvature", 10.0);
+        spec->bevel_force = num_field(L, ni, "bevel_force", ns_default_coupling_params().bevel_force[0]);
         spec->twist_friction = bool_field(L, ni, "twist_friction", true);
     } else {
         spec->needle_kind = malloc(6);
@@ -475,6 +479,7 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
         spec->bevel_deg = 30.0;
         spec->steering = NS_BEVEL_FORCE;
         spec->arc_curvature = 10.0;
+        spec->bevel_force = ns_default_coupling_params().bevel_force[0];
         spec->twist_friction = true;
     }
     lua_pop(L, 1);

@@ -47,6 +47,7 @@ typedef struct NsRunSpec {
     double bevel_deg;
     int steering;         /* steering = "force" | "displacement" | "arc": an NsBevelModel */
     double arc_curvature; /* its curvature at tan(psi) = 1 [1/m] */
+    double bevel_force;   /* the force model's k_b: lateral tip force at tan(psi) = 1 [N] */
     bool twist_friction;  /* torsional friction with the tissue (sim/twist_friction.h) */
     /* entry = {point, direction} (direction of unit length) */
     double entry_point[3], entry_dir[3];

@@ -870,7 +870,7 @@ end
 -- Needle -----------------------------------------------------------------------------------
 
 local NEEDLE_FIELDS = { "kind", "diameter", "inner_diameter", "youngs", "density", "tip",
-    "bevel_deg", "steering", "curvature", "twist_friction" }
+    "bevel_deg", "steering", "curvature", "bevel_force", "twist_friction" }
 -- The two needles of the paper's brachytherapy runs (§4, Table 2: ProsSS and ProsFB): an 18 G
 -- stainless-steel needle with a symmetric tip, and a flexible nitinol needle with a bevel tip
 -- (the phantom experiments' 0.83 mm needle).
@@ -882,11 +882,12 @@ local NEEDLE_KINDS = {
 }
 
 --- ns.needle{kind, diameter, inner_diameter, youngs, density, tip, bevel_deg, steering, curvature,
---            twist_friction}
+--            bevel_force, twist_friction}
 -- `kind` ("stiff" or "flexible", default "stiff") gives every field not given. `steering` is
 -- how a bevel tip steers (docs/remeshing.md): "force" (the default: a lateral force at the
 -- tip), "displacement" (the paper's §3.5: each cut moved sideways by d * tan(bevel)) or "arc"
--- (the nonholonomic model: the cut turns at curvature * tan(bevel) [1/m]).
+-- (the nonholonomic model: the cut turns at curvature * tan(bevel) [1/m]). `bevel_force` is the
+-- force model's k_b [N] (default 0.5): the tip is pushed sideways by k_b * tan(bevel).
 -- `twist_friction` (default true): the tissue holds the shaft's twist with a stick/slip torque
 -- of at most friction * diameter / 2 per unit length (docs/needle.md).
 function ns.needle(t)
@@ -905,6 +906,8 @@ function ns.needle(t)
             "in (0, 90) [degrees]", d.bevel_deg),
         steering = a:choice("steering", { "force", "displacement", "arc" }, "force"),
         curvature = a:number("curvature", GT0, "> 0 [1/m]", 10),
+        bevel_force = a:number("bevel_force", function(x) return x >= 0 and x <= 10 end,
+            "in [0, 10] [N]", 0.5),
         twist_friction = a:boolean("twist_friction", true),
         where = where,
     }
@@ -914,6 +917,10 @@ function ns.needle(t)
     end
     if a:get("curvature") ~= nil and (n.steering ~= "arc" or n.tip ~= "bevel") then
         a:fail("curvature is the arc model's: it needs tip = \"bevel\" and steering = \"arc\"")
+    end
+    if a:get("bevel_force") ~= nil and (n.steering ~= "force" or n.tip ~= "bevel") then
+        a:fail("bevel_force is the force model's: it needs tip = \"bevel\" and steering = " ..
+            "\"force\"")
     end
     return new(NEEDLE, n)
 end

@@ -20,6 +20,10 @@
 #define NS_LIMIT_BASE_SPEED 0.5
 /* One twist angle (act.twist{angle}, a live {"twist": rad}) [rad]: 100 turns. */
 #define NS_LIMIT_TWIST_ANGLE 628.0
+/* The force steering model's k_b (needle.bevel_force) [N]: the lateral tip force at
+ * tan(psi) = 1. The default is 0.5 N; 10 N pushes any needle's tip sideways harder than the
+ * axial forces of a whole insertion (a few newtons, materials.lua). */
+#define NS_LIMIT_BEVEL_FORCE 10.0
 
 /* Nodes of the needle's rod after a reparameterization (§3.4.2): a rod of 0.3 m at the finest
  * edge any scenario uses (0.1 mm) has 3,000. */

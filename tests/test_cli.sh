@@ -388,6 +388,12 @@ expect_error "needle: unknown steering model" 1 \
 expect_error "needle: curvature without the arc model" 1 \
     "tests/data/bad_curvature.lua:6: ns.needle: curvature is the arc model's" -- \
     check tests/data/bad_curvature.lua
+expect_error "needle: bevel_force without the force model" 1 \
+    "tests/data/bad_bevel_force.lua:6: ns.needle: bevel_force is the force model's" -- \
+    check tests/data/bad_bevel_force.lua
+expect_error "needle: bevel_force out of range" 1 \
+    "tests/data/bad_bevel_force_range.lua:7: ns.needle: bevel_force must be a number in [0, 10] [N] (got 50)" -- \
+    check tests/data/bad_bevel_force_range.lua
 expect_error "solver: tolerance out of range" 1 \
     "tests/data/bad_solver.lua:2: ns.scenario: solver: tolerance must be a number in (0, 1)" -- \
     check tests/data/bad_solver.lua

@@ -8,10 +8,11 @@
 --   needle       "stiff" (steel, symmetric tip) or "flexible" (nitinol, bevel tip)
 --   cut_force    the gel's cutting force [N]          (0.3 x youngs / 20 kPa)
 --   friction     needle-gel friction [N/m]            (30 x youngs / 20 kPa)
--- The cutting force and the friction scale with the modulus: both are set by the stress that
--- opens the gel around a needle of a given size, which for a gel of a given strain to failure
--- is proportional to its modulus (0.3 N and 30 N/m at 20 kPa, the gel of scripts/needlesim/
--- materials.lua). Held at 0.3 N and 30 N/m, a 1-2 kPa gel cannot give the tip 0.3 N before
+--   bevel_force  the flexible needle's k_b [N]        (0.5 x youngs / 20 kPa)
+-- The cutting force, the friction and the bevel's lateral force scale with the modulus: all
+-- three are set by the stress that opens the gel around a needle of a given size, which for a
+-- gel of a given strain to failure is proportional to its modulus (0.3 N and 30 N/m at 20 kPa,
+-- the gel of scripts/needlesim/materials.lua; k_b 0.5 N, the default, at 20 kPa). Held at 0.3 N and 30 N/m, a 1-2 kPa gel cannot give the tip 0.3 N before
 -- it is indented centimetres (docs/performance.md, "Stability map").
 -- The stiff needle should stay on the line: the lateral tip deviation is the run's error.
 local ns = require "needlesim"
@@ -37,7 +38,9 @@ return ns.scenario {
         },
         fixed_faces = { "zmax" },
     },
-    needle = ns.needle { kind = ns.param("needle", "stiff") },
+    needle = ns.param("needle", "stiff") == "flexible"
+        and ns.needle { kind = "flexible", bevel_force = ns.param("bevel_force", 0.5 * youngs / 20e3) }
+        or ns.needle { kind = "stiff" },
     entry = { point = { 0, 0, 0 }, direction = { 0, 0, 1 } },
     script = function()
         if vigorous then
