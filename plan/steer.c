@@ -140,7 +140,8 @@ int ns_steer_rollout(const NsSteerParams *prm, const NsSteerLoop *loop, const Ns
     double inserted = 0.0, turned = 0.0, straightness = 0.0;
     NsSteerParams model = *prm;
     while (inserted < loop->max_length) {
-        const NsPlanPose *tip = &path->poses[path->action_count];
+        /* a copy: pushing the action may move path->poses */
+        const NsPlanPose tip_pose = path->poses[path->action_count], *tip = &tip_pose;
         double q[3], d[3];
         target_now(loop, inserted, q);
         pm_sub(q, tip->p, d);
