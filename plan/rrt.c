@@ -59,8 +59,8 @@ static bool arc_to(const NsPlanPose *pose, const double q[3], double kappa, NsPl
     if (need > kappa * (1.0 + 1e-12))
         return false;
     need = fmin(need, kappa);
-    double th = 2.0 * atan2(b, fwd); /* the turn of the tangent along the arc */
-    a->twist = b > 0.0 ? atan2(-y, x) : 0.0;
+    double th = 2.0 * atan2(b, fwd);               /* the turn of the tangent along the arc */
+    a->twist = b > 0.0 ? atan2(-y, x) + 0.0 : 0.0; /* + 0.0: no -0 in the output */
     a->duty = 1.0 - need / kappa;
     a->rate = 0.0;
     a->length = need > 0.0 ? th / need : fwd;
