@@ -30,6 +30,10 @@ static const char usage[] =
     "                 [--record LOG.csv] [-o DIR] [--set KEY=VALUE]... [--threads N] [--quiet]\n"
     "      a trainee drives the needle from a browser in real time (docs/live.md); the session\n"
     "      is scored and its controls recorded as `run` does\n"
+    "  needlesim plan SCENARIO.lua --target NAME [--json] [-o DIR] [--clearance M]\n"
+    "                 [--method rrt|helix] [--seed N]\n"
+    "      plan a bevel-tip insertion to a target around the obstacles on the kinematic model\n"
+    "      (docs/planning.md): predicted error, clearance, length and planning time\n"
     "  needlesim validate [CASE...] [--json] [--list]\n"
     "      run the built-in validation cases (docs/validation.md); exit 1 if any fails\n"
     "  needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--set KEY=VALUE]\n"
@@ -84,6 +88,8 @@ int main(int argc, char **argv)
         return ns_cmd_bench(argc - 1, argv + 1);
     if (strcmp(cmd, "live") == 0)
         return ns_cmd_live(argc - 1, argv + 1);
+    if (strcmp(cmd, "plan") == 0)
+        return ns_cmd_plan(argc - 1, argv + 1);
     if (cmd[0] == '-')
         fprintf(stderr, "needlesim: unknown option '%s' (needlesim --help)\n", cmd);
     else

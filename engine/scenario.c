@@ -19,6 +19,7 @@
 
 #include <lauxlib.h>
 
+#include "err.h"
 #include "mesh_io.h"
 #include "ns_limits.h"
 #include "quality.h"
@@ -693,4 +694,70 @@ const char **ns_scenario_region_names(const NsScenario *sc)
     for (int i = 0; i < sc->region_count; i++)
         names[i] = sc->regions[i].name;
     return names;
+}
+
+typedef struct RegionShapeIO {
+    Builder *b;
+    int region;
+    NsShape *shape;
+} RegionShapeIO;
+
+/* Under lua_pcall: the shape of tissue.regions[region + 1] from the scenario's table. */
+static int region_shape_body(lua_State *L)
+{
+    RegionShapeIO *io = lua_touserdata(L, 1);
+    Builder *b = io->b;
+    const NsScenario *sc = b->sc;
+    lua_rawgeti(L, LUA_REGISTRYINDEX, sc->table_ref);
+    if (scn_rawfield(L, -1, "tissue") != LUA_TTABLE ||
+        scn_rawfield(L, -1, "regions") != LUA_TTABLE ||
+        scn_rawindex(L, -1, io->region + 1) != LUA_TTABLE) {
+        scn_fail(b, "%s: region '%s' has no shape in the scenario's table", sc->path,
+                 sc->regions[io->region].name);
+        return 0;
+    }
+    char ctx[96];
+    snprintf(ctx, sizeof ctx, "ns.tissue.shapes: regions[%d]", io->region + 1);
+    io->shape = scn_shape_field(b, lua_gettop(L), "shape", sc->tissue_where ? sc->tissue_where : "",
+                                ctx, 0);
+    return 0;
+}
+
+NsShape *ns_scenario_region_shape(const NsScenario *sc, int region, char *err, int err_sz)
+{
+    if (!sc || !sc->lua || sc->table_ref == LUA_NOREF || region < 0 || region >= sc->region_count) {
+        ns_set_err(err, err_sz, "needlesim: no region %d in the scenario", region);
+        return NULL;
+    }
+    if (sc->tissue_kind != NS_TISSUE_SHAPES) {
+        ns_set_err(err, err_sz,
+                   "%s: region '%s' is not a shape (the tissue is not ns.tissue.shapes)", sc->path,
+                   sc->regions[region].name);
+        return NULL;
+    }
+    Builder b = {.sc = (NsScenario *)sc, .err = err, .err_sz = err_sz};
+    lua_State *L = ns_lua_state(sc->lua);
+    b.L = L;
+    int top = lua_gettop(L);
+    RegionShapeIO io = {.b = &b, .region = region, .shape = NULL};
+    lua_pushcfunction(L, region_shape_body);
+    lua_pushlightuserdata(L, &io);
+    int rc = ns_lua_call(sc->lua, 1, 0, err, err_sz);
+    lua_settop(L, top);
+    if (b.nfns > 0 && io.shape) {
+        ns_shape_release(io.shape);
+        io.shape = NULL;
+        ns_set_err(err, err_sz, "%s: region '%s' uses a Lua function shape", sc->path,
+                   sc->regions[region].name);
+    }
+    for (int i = 0; i < b.nfns; i++) {
+        luaL_unref(L, LUA_REGISTRYINDEX, b.fns[i]->ref);
+        free(b.fns[i]);
+    }
+    free(b.fns);
+    if (rc != 0 && io.shape) {
+        ns_shape_release(io.shape);
+        io.shape = NULL;
+    }
+    return io.shape;
 }

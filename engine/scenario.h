@@ -89,6 +89,13 @@ const char **ns_scenario_region_names(const NsScenario *sc);
 
 const char *ns_material_model_name(NsElasticModel m);
 
+/* The shape written for region `region` of an ns.tissue.shapes tissue, read again from the
+ * scenario's table: a new reference (ns_shape_release it), or NULL with a message when the
+ * tissue is not made of shapes or the region uses a Lua function shape. The region's meshed
+ * volume is this shape less what later regions in the list take from it. */
+struct NsShape;
+struct NsShape *ns_scenario_region_shape(const NsScenario *sc, int region, char *err, int err_sz);
+
 /* The memory the mesher may plan to use for the process's later loads [bytes]; 0 (the
  * default): NS_LIMIT_MESHER_BYTES. The fuzz harness lowers it, so that every input meshes in
  * well under its time limit. */
