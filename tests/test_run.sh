@@ -57,7 +57,10 @@ assert hits, "no target hit: " + ", ".join("%s %.2f mm" % (t["name"], t["error_m
 bad = [o["name"] for o in r["obstacles"] if o["violated"]]
 assert not bad, "obstacles entered: %s" % bad
 assert r["script_finished"] and r["needle"]["depth_m"] < 0.002
-print("hit: " + ", ".join(hits) + "; errors " + ", ".join("%.2f mm" % t["error_mm"] for t in r["targets"]))
+# issue 35: the whole mesh's worst dihedral angle at rest over every step
+assert r["mesh"]["min_dihedral_deg_any_step"] >= 5.0, r["mesh"]
+print("hit: " + ", ".join(hits) + "; errors " + ", ".join("%.2f mm" % t["error_mm"] for t in r["targets"]) +
+      "; min_dihedral_deg_any_step %.2f" % r["mesh"]["min_dihedral_deg_any_step"])
 PY
 if [ $? = 0 ]; then pass "report finite, seeds released, a target hit, no obstacle entered ($(cat "$TMP/py"))"; else fail "report" "$(tail -1 "$TMP/py")"; fi
 # The issue's video: H.264, 1280x720, yuv420p, one frame per frame rendered; the contact sheet.
@@ -88,7 +91,8 @@ if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "--record then --replay: same state
     exit
 fi
 
-# Every other shipped scenario runs and writes a report whose fields are all finite.
+# Every other shipped scenario runs and writes a report whose fields are all finite, its mesh's
+# worst dihedral angle over every step at least 5 deg.
 if [ "$PART" = scenarios ]; then
     for sc in tutorial two_cylinders phantom_single_bend phantom_double_bend; do
         "$BIN" run "$SRC/scenarios/$sc.lua" --no-render -o "$TMP/$sc" --quiet >/dev/null 2>"$TMP/err_$sc"
@@ -99,7 +103,10 @@ r = json.load(open(sys.argv[1]))
 exec(open(sys.argv[2]).read())
 finite(r, "report")
 assert r["steps"] > 0 and r["script_finished"]
-print("%d steps, score %.1f" % (r["steps"], r["score"]["total"]))
+# issue 35: the whole mesh's worst dihedral angle at rest over every step
+assert r["mesh"]["min_dihedral_deg_any_step"] >= 5.0, r["mesh"]
+print("%d steps, score %.1f, min_dihedral_deg_any_step %.2f" % (
+    r["steps"], r["score"]["total"], r["mesh"]["min_dihedral_deg_any_step"]))
 PY
             pass "$sc runs, report finite ($(cat "$TMP/py_$sc"))"
         else
