@@ -158,7 +158,7 @@ double ns_tg43_mean_life(const NsTg43Source *s)
 
 /* The grid's arithmetic. Two thirds of a plain evaluation went to libm's atan2 and to the table
  * searches (perf, 80 seeds x 64,000 voxels): the grid uses its own arctangent (a reduction to
- * |x| <= 1/32 by a table of atan(k/16), then the Taylor series; plain arithmetic, so
+ * |x| <= 1/128 by a table of atan(k/64), then the Taylor series; plain arithmetic, so
  * the same bits for every thread count) and finds table intervals from a bin index
  * made once per source. ns_dose_at uses the same code, so a voxel is exactly the point value. */
 #define R_BIN  2.5e-4         /* radial bin of the interval index [m] */
@@ -166,27 +166,29 @@ double ns_tg43_mean_life(const NsTg43Source *s)
 #define T_BIN  (M_PI / 180.0) /* angular bin [rad] */
 #define T_BINS 91
 
-/* atan(x), 0 <= x <= 1: atan x = atan c + atan((x - c) / (1 + x c)) with c the nearest k/16
- * (atan_c[k] = atan(k/16)), |reduced| <= 1/32, then the odd Taylor series to y^15 (the next
- * term is below 1e-22 of the sum). */
+/* atan(x), 0 <= x <= 1: atan x = atan c + atan((x - c) / (1 + x c)) with c the nearest k/64
+ * (atan_c[k] = atan(k/64)), |reduced| <= 1/128, then the odd Taylor series to y^9 (the next
+ * term is below 1e-21 of the sum). */
 static double atan_unit(const double *atan_c, double x)
 {
-    static const double c[8] = {1.0,     1.0 / 3,  1.0 / 5,  1.0 / 7,
-                                1.0 / 9, 1.0 / 11, 1.0 / 13, 1.0 / 15};
-    int k = (int)(x * 16.0 + 0.5);
-    double ck = k * 0.0625;
-    double y = (x - ck) / (1.0 + x * ck), y2 = y * y, p = c[7];
-    for (int i = 6; i >= 0; i--) /* y sum_i (-1)^i y^(2i) / (2i+1), Horner in y^2 */
-        p = c[i] - y2 * p;
+    int k = (int)(x * 64.0 + 0.5);
+    double ck = k * (1.0 / 64);
+    double y = (x - ck) / (1.0 + x * ck), y2 = y * y;
+    /* y (1 - y^2/3 + y^4/5 - y^6/7 + y^8/9), Horner in y^2 */
+    double p = 1.0 / 7 - y2 * (1.0 / 9);
+    p = 1.0 / 5 - y2 * p;
+    p = 1.0 / 3 - y2 * p;
+    p = 1.0 - y2 * p;
     return atan_c[k] + y * p;
 }
 
-/* atan2(y, x) for y >= 0, x >= 0 (0 at the origin). */
+/* atan2(y, x) for y >= 0, x >= 0 (0 at the origin): the smaller over the larger, so that which
+ * of the two is larger is a select, not a branch (it changes from voxel to voxel). */
 static double atan2_pos(const double *atan_c, double y, double x)
 {
-    if (y <= x)
-        return x > 0.0 ? atan_unit(atan_c, y / x) : 0.0;
-    return PI_2 - atan_unit(atan_c, x / y);
+    double lo = y < x ? y : x, hi = y < x ? x : y;
+    double a = hi > 0.0 ? atan_unit(atan_c, lo / hi) : 0.0;
+    return y <= x ? a : PI_2 - a;
 }
 
 /* What the grid needs per source and per seed, computed once. */
@@ -197,7 +199,7 @@ typedef struct Prep {
     unsigned char g_at[R_BINS];     /* the g_L interval a radius in bin b starts its search at */
     unsigned char f_at[R_BINS];     /* the same for F's radii */
     unsigned char t_at[T_BINS + 1]; /* and for F's angles */
-    double atan_c[17];              /* atan(k/16), k = 0..16 */
+    double atan_c[65];              /* atan(k/64), k = 0..64 */
     double g_inv[NS_TG43_MAX_G];    /* 1 / (g_r[i+1] - g_r[i]) */
     double fr_inv[NS_TG43_MAX_FR];  /* 1 / (f_r[i+1] - f_r[i]) */
     double ft_inv[NS_TG43_MAX_FT];  /* 1 / (f_theta[i+1] - f_theta[i]) */
@@ -220,8 +222,8 @@ static void prep_source(const NsTg43Source *s, Prep *P)
     }
     for (int b = 0; b <= T_BINS; b++)
         P->t_at[b] = (unsigned char)bracket(s->f_theta, s->n_ft, b * T_BIN);
-    for (int k = 0; k <= 16; k++)
-        P->atan_c[k] = atan(k / 16.0);
+    for (int k = 0; k <= 64; k++)
+        P->atan_c[k] = atan(k / 64.0);
     for (int i = 0; i + 1 < s->n_g; i++)
         P->g_inv[i] = 1.0 / (s->g_r[i + 1] - s->g_r[i]);
     for (int i = 0; i + 1 < s->n_fr; i++)
