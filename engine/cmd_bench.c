@@ -37,7 +37,8 @@ static const char bench_usage[] =
     "usage: needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N]\n"
     "                       [--set KEY=VALUE]... [--compare NAME] [--repeat N] [--json]\n"
     "                       [--snapshot]\n"
-    "       needlesim bench --live SCENARIO.lua [--seconds S] [--json] (a live session)\n";
+    "       needlesim bench --live SCENARIO.lua [--seconds S] [--json] (a live session)\n"
+    "       needlesim bench --dose [--repeat N] [--threads N] [--json] (TG-43 dose grid)\n";
 
 #define BENCH_MAX_REPEAT 100
 
@@ -435,6 +436,9 @@ int ns_cmd_bench(int argc, char **argv)
     for (int i = 1; i < argc; i++)
         if (strcmp(argv[i], "--live") == 0)
             return ns_bench_live(argc, argv);
+    for (int i = 1; i < argc; i++)
+        if (strcmp(argv[i], "--dose") == 0)
+            return ns_bench_dose(argc, argv);
     NsRunOpts o;
     memset(&o, 0, sizeof o);
     o.threads = 1;

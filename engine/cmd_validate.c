@@ -31,6 +31,7 @@ static const CaseTable tables[] = {
     {ns_validate_coupling_cases, &ns_validate_coupling_case_count},
     {ns_validate_remesh_cases, &ns_validate_remesh_case_count},
     {ns_validate_steering_cases, &ns_validate_steering_case_count},
+    {ns_validate_dose_cases, &ns_validate_dose_case_count},
 };
 #define TABLE_COUNT ((int)(sizeof tables / sizeof tables[0]))
 

@@ -39,6 +39,8 @@ static const char usage[] =
     "  needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--set KEY=VALUE]\n"
     "                  [--json]\n"
     "      per-stage step timings of the scenario's script (the paper's Tables 2 and 3)\n"
+    "  needlesim bench --dose [--repeat N] [--threads N] [--json]\n"
+    "      TG-43 dose grid of a synthetic 80-seed implant (docs/brachytherapy.md)\n"
     "  needlesim --help | --version\n"
     "\n"
     "Scenarios are Lua files; see docs/scenarios.md.\n";

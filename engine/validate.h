@@ -48,6 +48,10 @@ extern const int ns_validate_remesh_case_count;
 extern const NsValidateCase ns_validate_steering_cases[];
 extern const int ns_validate_steering_case_count;
 
+/* The TG-43U1 dose cases (engine/validate_dose.c). */
+extern const NsValidateCase ns_validate_dose_cases[];
+extern const int ns_validate_dose_case_count;
+
 /* Appends printf-style text to r->detail. */
 void ns_validate_detail(NsValidateResult *r, const char *fmt, ...)
     __attribute__((format(printf, 2, 3)));

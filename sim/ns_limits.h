@@ -72,6 +72,8 @@
 #define NS_LIMIT_LOG_FILE_BYTES ((long long)256 << 20)
 /* A scenario file or module [bytes]. */
 #define NS_LIMIT_SCRIPT_FILE_BYTES ((long long)16 << 20)
+/* A dosimetry table (the assets/tg43 CSV files) [bytes]: the 6711 table is ~4 kB. */
+#define NS_LIMIT_DOSE_TABLE_BYTES ((long long)1 << 20)
 
 /* ---- meshes ------------------------------------------------------------------------------- */
 

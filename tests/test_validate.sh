@@ -28,7 +28,8 @@ fail() {
 
 GROUP1="fem-patch fem-compression fem-cantilever fem-vibration fem-inversion fem-lazy
 rod-cantilever rod-buckling rod-twist rod-torsion rod-length rod-reparam friction-stick
-friction-slip friction-reversal twist-friction puncture solver-agreement"
+friction-slip friction-reversal twist-friction puncture solver-agreement tg43-dose-rate
+tg43-radial tg43-anisotropy tg43-geometry"
 GROUP2="symmetric-straight remesh-restore remesh-substeps double-bend"
 ALL="$GROUP1 $GROUP2"
 case "$GROUP" in
