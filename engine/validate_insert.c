@@ -126,6 +126,10 @@ static int gel_needle(const Insertion *in, NsTissue *tissue, const int *nodes, i
     cp.cut_force[0] = 0.05;
     cp.remesh = 1;
     cp.bevel_model = in->bevel_model;
+    /* The bevel force's pair of balls (docs/needle.md, "The bevel force's reaction") at 5 mm,
+     * which this 4 mm grid resolves: the default 15 mm, sized for the phantom's 13 mm mesh, would
+     * reach from a path 4 mm off a clamped face (bevel-arc's) well into it. */
+    cp.tip_load_radius = 5e-3;
     return vr_couple(tissue, rod, nodes, np, &cp, entry, c, err, err_sz);
 }
 

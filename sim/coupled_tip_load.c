@@ -2,19 +2,23 @@
  * reaction"): while the needle is pushed in (v_insert > 0) and its tip is not sliding back, the
  * bevel face presses on the tissue whether the tip cuts this step or sticks while the load
  * builds (an on/off force by the last step's state, DYNAMIC+ only, made the mean force depend on
- * dt through the stick-slip's duty cycle: 96 % of steps at dt 10 ms, 78 % at 5 ms), the lateral
- * force k_b tan(psi) on the needle's tip along the tip frame's m2, and its reaction on the tissue
- * ahead of the tip, which the tissue takes over a ball of physical size rather than at one point. A
- * force put at one point of a 3D mesh strains the elements around it as F / (E h^2) and moves them
- * by about F / (E h), without limit as the element size h shrinks; the cut follows that strain, so
- * a tip path steered by it does not converge under mesh refinement (it did not: docs/needle.md).
- * Here the reaction is a body force of fixed shape: the density (1 - r^2/R^2)^2 over the ball of
- * radius R = tip_load_radius just ahead of the tip (centred R ahead along the tip tangent, touching
- * the tip), integrated against the elements' shape functions at a lattice of points fixed relative
+ * dt through the stick-slip's duty cycle: 96 % of steps at dt 10 ms, 78 % at 5 ms). The bevel
+ * pushes the tissue it cuts sideways, against the tip frame's m2, with k_b tan(psi), and the tip,
+ * pushed along m2 by the same force, passes it on to the tissue around the needle's end. The
+ * paper (§3.5) notes that this happens at a scale too small for the mesh; we model it as a pair of
+ * body forces of fixed shape in the tissue: the density (1 - r^2/R^2)^2 over a ball of radius
+ * R = tip_load_radius centred R ahead of the tip along its tangent (the reaction, -m2) and its
+ * mirror centred R behind the tip (the needle's side, +m2), the two balls touching at the tip.
+ * Each is integrated against the elements' shape functions at a lattice of points fixed relative
  * to the tip (spacing R/4, 257 points): the nodes' consistent loads, which tend to the continuum's
- * as the mesh is refined and no longer depend on it once the elements are finer than the ball. The
- * tip's own node takes no share (it is the needle's: a share there would push the needle back, not
- * the tissue ahead); the shares of points outside the tissue are dropped and the rest renormalized.
+ * as the mesh is refined once the elements are finer than the ball. A force put at one point of a
+ * 3D mesh (the needle's push, when it reached the tissue through the tip's coupled node) strains
+ * the elements around it as F / (E h^2), without limit as the element size h shrinks, and the cut
+ * follows that strain: the tip path did not converge under mesh refinement (docs/needle.md). The
+ * needle itself takes no load here: the tissue's displacement bends it through the coupling. The
+ * ball ahead leaves out the tip's own node (the needle's: a share there would push the needle
+ * back, not the tissue ahead); the shares of points outside the tissue are dropped and the rest
+ * renormalized, each ball on its own, so the pair stays balanced.
  */
 #include "coupling_internal.h"
 
@@ -29,16 +33,17 @@ static double norm3(const double *a)
     return sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
 }
 
-/* Adds the force f (3 components) to et, spread over the ball ahead of the tip (see above).
- * Returns 1, or 0 when no point of the ball is in the tissue (nothing added). */
-static int spread_ahead(const NsCoupled *c, const double tip[3], const double t[3], int tipn,
-                        const double f[3], double *et)
+/* Adds the force f (3 components) to et, spread over the ball of radius R centred side * R
+ * along t from the tip (side 1 ahead, -1 behind; see above), off node skip (-1: none). Returns
+ * 1, or 0 when no point of the ball is in the tissue (nothing added). */
+static int spread_ball(const NsCoupled *c, const double tip[3], const double t[3], double side,
+                       int tipn, int skip, const double f[3], double *et)
 {
     const NsMesh *M = &c->tissue->mesh;
     double R = c->params.tip_load_radius, s = R / LATTICE_N, ctr[3];
     for (int i = 0; i < 3; i++)
-        ctr[i] = tip[i] + R * t[i];
-    /* First pass: the total weight of the points inside the tissue, off the tip's node. */
+        ctr[i] = tip[i] + side * R * t[i];
+    /* First pass: the total weight of the points inside the tissue, off the node skipped. */
     int hint = M->node_tets[tipn].count ? M->node_tets[tipn].items[0] : -1;
     double wsum = 0.0;
     for (int pass = 0; pass < 2; pass++) {
@@ -60,7 +65,7 @@ static int spread_ahead(const NsCoupled *c, const double tip[3], const double t[
                     h = te;
                     const int *tn = M->tet_node + 4 * te;
                     for (int a = 0; a < 4; a++) {
-                        if (tn[a] == tipn)
+                        if (tn[a] == skip)
                             continue;
                         if (pass == 0) {
                             wsum += rho * b[a];
@@ -75,13 +80,12 @@ static int spread_ahead(const NsCoupled *c, const double tip[3], const double t[
     return 1;
 }
 
-int coupled_tip_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
-                     double **et, double **er)
+int coupled_tip_load(NsCoupled *c, const double *ext_tissue, double *f_out, double **et)
 {
     NsRod *r = c->rod;
     NsMesh *M = &c->tissue->mesh;
     int n = r->nodes;
-    *et = *er = NULL;
+    *et = NULL;
     *f_out = 0.0;
     if (!c->params.remesh || c->outside || c->path.through || r->params.tip != NS_TIP_BEVEL ||
         c->params.bevel_model != NS_BEVEL_FORCE || c->ta[n - 1] < 0 || c->path.count < 2 ||
@@ -103,24 +107,25 @@ int coupled_tip_load(NsCoupled *c, const double *ext_tissue, const double *ext_r
     double fb = kb * tan(r->params.bevel_angle);
     if (!(fb != 0.0))
         return 0;
-    size_t nt = 3 * (size_t)M->node_slots, nr = 3 * (size_t)n;
+    size_t nt = 3 * (size_t)M->node_slots;
     *et = ns_arena_push_zero(&c->arena, nt * sizeof **et);
-    *er = ns_arena_push_zero(&c->arena, nr * sizeof **er);
-    if (!*et || !*er) {
-        ns_arena_pop(&c->arena, *er);
-        ns_arena_pop(&c->arena, *et);
-        *et = *er = NULL;
+    if (!*et)
         return -1;
-    }
     if (ext_tissue)
         memcpy(*et, ext_tissue, nt * sizeof **et);
-    if (ext_rod)
-        memcpy(*er, ext_rod, nr * sizeof **er);
-    double f[3] = {-fb * m2[0], -fb * m2[1], -fb * m2[2]};
-    if (!spread_ahead(c, r->x + 3 * (n - 1), t, tn, f, *et))
-        return 0; /* nothing ahead in the tissue: the tip is at the surface (both left as given) */
-    for (int i = 0; i < 3; i++)
-        (*er)[3 * (n - 1) + i] += fb * m2[i];
+    double ahead[3] = {-fb * m2[0], -fb * m2[1], -fb * m2[2]},
+           behind[3] = {fb * m2[0], fb * m2[1], fb * m2[2]};
+    const double *tip = r->x + 3 * (n - 1);
+    if (!spread_ball(c, tip, t, 1.0, tn, tn, ahead, *et))
+        return 0; /* nothing ahead in the tissue: the tip is at the surface (left as given) */
+    if (!spread_ball(c, tip, t, -1.0, tn, -1, behind, *et)) {
+        /* nothing behind in the tissue (not reached: the tip's tets are): the pair undone */
+        if (ext_tissue)
+            memcpy(*et, ext_tissue, nt * sizeof **et);
+        else
+            memset(*et, 0, nt * sizeof **et);
+        return 0;
+    }
     *f_out = fb;
     return 0;
 }

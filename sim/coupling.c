@@ -46,10 +46,10 @@ NsCouplingParams ns_default_coupling_params(void)
     p.tip_block = 0;
     p.remesh_dihedral_floor = 12.0;
     p.bevel_model = NS_BEVEL_FORCE;
-    p.tip_load_radius = 5e-3; /* m: docs/needle.md, "Loads at the tip" */
+    p.tip_load_radius = 15e-3; /* m: docs/needle.md, "The bevel force's reaction" */
     for (int k = 0; k < NS_COUPLING_MAX_REGIONS; k++) {
         p.bevel_force[k] = 0.5;      /* N: docs/remeshing.md (bevel steering) */
-        p.bevel_curvature[k] = 10.0; /* 1/m: the force model's at 45 deg in the gel (ibid.) */
+        p.bevel_curvature[k] = 10.0; /* 1/m: docs/remeshing.md (bevel steering) */
     }
     return p;
 }

@@ -63,10 +63,11 @@ int ns_coupled_solver_parse(const char *name);
 /* How a bevel tip (NsRodParams.tip = NS_TIP_BEVEL, angle psi) steers when the tissue is remeshed
  * at the tip (docs/remeshing.md compares the two). */
 typedef enum NsBevelModel {
-    /* Ours, the default: while the tip cuts, the tissue at the bevel pushes it along the tip
-     * frame's m2 with k_b tan(psi), k_b = bevel_force[region]; the tissue ahead of the tip
-     * takes the reaction, spread over a ball of radius tip_load_radius, so neither depends on
-     * the mesh. */
+    /* Ours, the default: while the tip cuts, the bevel pushes the tissue ahead of the tip
+     * against the tip frame's m2 with k_b tan(psi), k_b = bevel_force[region], and the tissue
+     * around the needle's end takes the needle's push along m2: a pair of body forces, each
+     * spread over a ball of radius tip_load_radius (ahead of the tip and behind it), so the
+     * load does not depend on the mesh once its elements resolve the balls. */
     NS_BEVEL_FORCE = 0,
     /* The paper's (§3.5): u_new is displaced by d tan(psi) along m2 in material space only.
      * The strain it leaves builds up at the tip's node to about (element size) tan(psi), so
@@ -113,8 +114,9 @@ typedef struct NsCouplingParams {
     double bevel_force[NS_COUPLING_MAX_REGIONS]; /* k_b by tissue region [N] (NS_BEVEL_FORCE) */
     /* k_c by tissue region: the cut's curvature at tan(psi) = 1 [1/m] (NS_BEVEL_ARC) */
     double bevel_curvature[NS_COUPLING_MAX_REGIONS];
-    /* the radius R of the ball ahead of the tip over which the tissue takes the bevel force's
-     * reaction (NS_BEVEL_FORCE; sim/coupled_tip_load.c, docs/needle.md) [m] */
+    /* the radius R of the two balls, ahead of the tip and behind it, over which the tissue takes
+     * the bevel force's pair (NS_BEVEL_FORCE; sim/coupled_tip_load.c, docs/needle.md): at least
+     * about the element size [m] */
     double tip_load_radius;
 } NsCouplingParams;
 

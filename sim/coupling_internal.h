@@ -16,12 +16,11 @@ void coupled_from_path(NsCoupled *c, int first, int keep_state);
 void coupled_tissue_point(const NsCoupled *c, int i, const double *v, double *out);
 
 /* coupled_assemble.c: the coupled system of one step (Eq. 7-8, §3.3). */
-/* coupled_tip_load.c: our bevel force (NS_BEVEL_FORCE) on the tip, and its reaction on the
- * tissue spread over a ball of radius tip_load_radius ahead of the tip. *f_out the bevel's lateral
- * force on the tip [N] (0: none); *et, *er the caller's external loads copied with them added,
- * pushed in that order on c->arena (NULL: no load). 0, or -1 (memory). */
-int coupled_tip_load(NsCoupled *c, const double *ext_tissue, const double *ext_rod, double *f_out,
-                     double **et, double **er);
+/* coupled_tip_load.c: our bevel force (NS_BEVEL_FORCE) as a pair of body forces in the tissue,
+ * -m2 over a ball of radius tip_load_radius ahead of the tip and +m2 over its mirror behind.
+ * *f_out the bevel's lateral force [N] (0: none); *et the caller's tissue loads copied with the
+ * pair added, pushed on c->arena (NULL: no load). 0, or -1 (memory). */
+int coupled_tip_load(NsCoupled *c, const double *ext_tissue, double *f_out, double **et);
 int coupled_count(const NsCoupled *c); /* coupling nodes now */
 /* Sets c->rod->twist_fric for the step about to be taken (sim/twist_friction.h): tau_f l_j (l_j
  * the rest length) on every edge whose two nodes are coupled to the tissue (the edges the sliding

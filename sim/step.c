@@ -22,7 +22,7 @@ typedef struct Step {
     NsCoupled *c;
     double dt;
     const NsStepControls *ctl;
-    double *bev_t, *bev_r; /* the caller's loads with the bevel's added, or NULL */
+    double *bev_t; /* the caller's tissue loads with the bevel's added, or NULL */
     NsCouplingStats st;
     NsRodStats rs;
     NsRodSystem sys;
@@ -69,12 +69,11 @@ static int fail(Step *s, const char *msg)
     return -1;
 }
 
-/* §3.5, ours (NS_BEVEL_FORCE): the bevel's lateral load on the tip, its reaction spread over the
- * tissue ahead (sim/coupled_tip_load.c), with the caller's loads. */
+/* §3.5, ours (NS_BEVEL_FORCE): the bevel's lateral load, a pair of body forces in the tissue
+ * about the tip (sim/coupled_tip_load.c), with the caller's loads. */
 static int bevel_load(Step *s)
 {
-    if (coupled_tip_load(s->c, s->ctl->ext_tissue, s->ctl->ext_rod, &s->st.bevel_force, &s->bev_t,
-                         &s->bev_r))
+    if (coupled_tip_load(s->c, s->ctl->ext_tissue, &s->st.bevel_force, &s->bev_t))
         return fail(s, "the tip's loads could not be applied");
     return 0;
 }
@@ -82,7 +81,7 @@ static int bevel_load(Step *s)
 /* 1. The needle's forces and Jacobians (§3.2: discrete elastic rod, the controls at its base). */
 static int needle_forces(Step *s)
 {
-    const double *ext = s->bev_r ? s->bev_r : s->ctl->ext_rod;
+    const double *ext = s->ctl->ext_rod;
     coupled_twist_bounds(s->c); /* torsional friction of the edges inside (twist_friction.h) */
     if (ns_rod_begin_step(s->c->rod, s->dt, ext, &s->sys, &s->rs)) {
         char msg[96];
@@ -100,9 +99,8 @@ static int tissue_forces(Step *s)
 {
     const double *ext = s->bev_t ? s->bev_t : s->ctl->ext_tissue;
     s->bt = ns_tissue_begin_step(s->c->tissue, s->dt, ext, &s->ts);
-    ns_arena_pop(&s->c->arena, s->bev_r);
     ns_arena_pop(&s->c->arena, s->bev_t);
-    s->bev_t = s->bev_r = NULL;
+    s->bev_t = NULL;
     return s->bt ? 0 : fail(s, "out of memory assembling the tissue matrix");
 }
 
