@@ -193,24 +193,40 @@ static int l_choose(lua_State *L)
     double t0 = ns_wall_s();
     NsSteerAction act = {0};
     bool fallback = a.rrt;
-    if (a.rrt) {
+    NsSteerParams sp = ns_steer_default(a.kappa);
+    if (ns_steer_choose(&sp, &a.pose, a.target, &act, err, sizeof err) != 0)
+        luaL_error(L, "sim.planner: %s", err);
+    if (a.rrt && a.nobs > 0) {
+        /* The helix choice's arc as predicted, to its closest approach: when it keeps the
+         * clearance there is nothing to plan around (the RRT would try the same arc first,
+         * but only where the target is within its curvature). */
+        NsPlanPath arc;
+        NsPlanAction pa = {act.twist, fmax(act.at, 1e-4), act.duty, act.rate};
+        if (!ns_plan_path_init(&arc, &a.pose, a.kappa) || !ns_plan_path_push(&arc, &pa)) {
+            ns_plan_path_free(&arc);
+            luaL_error(L, "needlesim: out of memory");
+        }
+        double c = ns_plan_path_clearance(&arc, a.obs, a.nobs, STEER_CHECK_STEP);
+        ns_plan_path_free(&arc);
+        if (c >= a.clearance)
+            fallback = false;
+    } else if (a.rrt) {
+        fallback = false;
+    }
+    if (fallback) {
         NsRrtParams prm = rrt_params(r, &a);
         NsPlanPath path;
         if (ns_rrt_plan(&prm, a.obs, a.nobs, &a.pose, a.target, &path, NULL, err, sizeof err) ==
-                0 &&
-            path.action_count > 0) {
-            act.twist = path.actions[0].twist;
-            act.duty = path.actions[0].duty;
-            act.rate = path.actions[0].rate;
-            act.miss = path.error;
-            fallback = false;
+            0) {
+            if (path.action_count > 0) {
+                act.twist = path.actions[0].twist;
+                act.duty = path.actions[0].duty;
+                act.rate = path.actions[0].rate;
+                act.miss = path.error;
+                fallback = false;
+            }
             ns_plan_path_free(&path);
         }
-    }
-    if (fallback || !a.rrt) {
-        NsSteerParams prm = ns_steer_default(a.kappa);
-        if (ns_steer_choose(&prm, &a.pose, a.target, &act, err, sizeof err) != 0)
-            luaL_error(L, "sim.planner: %s", err);
     }
     double ms = 1e3 * (ns_wall_s() - t0);
     if (ns_series_push(&s->ms, ms) != 0)

@@ -439,7 +439,7 @@ end
 -- planner for the twist and duty cycle whose predicted arc passes closest to it ("helix", the
 -- default) or for the first action of an RRT around the obstacles named in `avoid` planned
 -- from there ("rrt", keeping `clearance` [m] from them, default 1 mm), turns the base by the
--- twist (at `twist_rate` [rad/s], default pi, the insertion paused), and inserts at `speed`
+-- twist (at `twist_rate` [rad/s], default 4 pi, the insertion paused), and inserts at `speed`
 -- [m/s] (default 0.01): the bevel held for (1 - duty) of the segment, then spun one whole turn
 -- over the rest (duty-cycled spinning). The curvature the planner predicts with is estimated
 -- from the tip's measured turning while the bevel was held. It stops when the tip passes its
@@ -455,7 +455,7 @@ function act.steer(t)
     local every = number(t, "steer", "replan_every", function(x) return x >= 1e-4 and x <= 0.1 end,
         "in [1e-4, 0.1] [m]", 2e-3)
     local speed = number(t, "steer", "speed", speed_ok, speed_what(), 0.01)
-    local twist_rate = number(t, "steer", "twist_rate", rate_ok, rate_what(), math.pi)
+    local twist_rate = number(t, "steer", "twist_rate", rate_ok, rate_what(), 4 * math.pi)
     local tol = number(t, "steer", "tolerance", GT0, "> 0 [m]", 1e-3)
     local q0, p0 = sim.targets[f.target], sim.tip
     local far = math.sqrt((q0[1] - p0[1]) ^ 2 + (q0[2] - p0[2]) ^ 2 + (q0[3] - p0[3]) ^ 2)
@@ -470,17 +470,17 @@ function act.steer(t)
     -- chord over the last CHORD metres: the tip's last edge leans towards the bevel more than
     -- the path it cuts, so its direction overstates the curvature)
     local CHORD, PRIOR = 4e-3, 10e-3
-    local trail_s, trail_p, travelled = { 0 }, { copy3(sim.tip) }, 0
+    local trail_p = { copy3(sim.tip) }
     local function chord()
-        local n = #trail_s
-        local k = n
-        while k > 1 and travelled - trail_s[k] < CHORD do
+        local n = #trail_p
+        local b, k, c, l = trail_p[n], n, { 0, 0, 0 }, 0
+        while k > 1 and l < CHORD do -- back until the chord is CHORD long (not travel: jitter)
             k = k - 1
+            local a = trail_p[k]
+            c = { b[1] - a[1], b[2] - a[2], b[3] - a[3] }
+            l = math.sqrt(dot(c, c))
         end
-        local a, b = trail_p[k], trail_p[n]
-        local c = { b[1] - a[1], b[2] - a[2], b[3] - a[3] }
-        local l = math.sqrt(dot(c, c))
-        if travelled - trail_s[k] < 0.5 * CHORD or l == 0 then
+        if l < 0.5 * CHORD then
             return nil
         end
         return { c[1] / l, c[2] / l, c[3] / l }
@@ -520,9 +520,7 @@ function act.steer(t)
             local p = sim.tip
             local dm = math.sqrt((p[1] - prev[1]) ^ 2 + (p[2] - prev[2]) ^ 2 + (p[3] - prev[3]) ^ 2)
             moved = moved + dm
-            travelled = travelled + dm
             prev = copy3(p)
-            trail_s[#trail_s + 1] = travelled
             trail_p[#trail_p + 1] = copy3(p)
             k = k + 1
         end
@@ -558,7 +556,7 @@ function act.steer(t)
         end
         -- shrunk towards the model's as if PRIOR metres had been seen turning at it, so the
         -- first few millimetres' noise does not swing it
-        kappa = math.max(0.1 * P.kappa, math.min(10 * P.kappa,
+        kappa = math.max(0.25 * P.kappa, math.min(4 * P.kappa,
             (turned + P.kappa * PRIOR) / (held + PRIOR)))
     end
     stop()
