@@ -68,6 +68,8 @@ typedef struct NsRunSteer {
     bool used, rrt;
     int target;    /* the steered-to target (-1: none) */
     bool *avoided; /* (obstacle_count): named in an avoid list */
+    double *way;   /* (way_n x 3) the kept RRT path's waypoints [m] */
+    int way_n;
 } NsRunSteer;
 
 /* ---- the model ---- */

@@ -18,10 +18,15 @@
 #include "run.h"
 #include "steer.h"
 
-#define STEER_PATH_STEP      1e-3    /* spacing of ns.plan's path points [m] */
-#define STEER_CHECK_STEP     0.25e-3 /* spacing of the clearance checks along a plan [m] */
-#define STEER_RRT_NODES      5000    /* an RRT per replan: smaller than needlesim plan's limits */
-#define STEER_RRT_ITERATIONS 20000
+#define STEER_PATH_STEP        1e-3    /* spacing of ns.plan's path points [m] */
+#define STEER_CHECK_STEP       0.25e-3 /* spacing of the clearance checks along a plan [m] */
+#define STEER_RRT_NODES        5000    /* an RRT per replan: smaller than needlesim plan's limits */
+#define STEER_RRT_ITERATIONS   20000
+#define STEER_TWIST_GAIN       0.5e-3 /* least predicted gain for which act.steer twists [m], */
+#define STEER_TWIST_GAIN_PER_M 0.02   /* ... or 2% of the distance to the target, if less */
+#define STEER_WAY_AHEAD        2e-3   /* a waypoint counts when this far ahead of the tip [m] */
+#define STEER_WAY_MISS         0.5e-3 /* ... and the helix choice reaches it this close [m] */
+#define STEER_RRT_MARGIN       0.85   /* act.steer's RRT plans with this much of the curvature */
 
 int ns_run_steer_setup(NsRun *r, char *err, int err_sz)
 {
@@ -54,6 +59,7 @@ void ns_run_steer_free(NsRunSteer *s)
     if (s->have_obs)
         ns_plan_obs_free(&s->obs);
     free(s->avoided);
+    free(s->way);
     free(s->ms.v);
     memset(s, 0, sizeof *s);
 }
@@ -178,6 +184,68 @@ static void set_field(lua_State *L, const char *key, double v)
     lua_setfield(L, -2, key);
 }
 
+/* The least distance to the obstacles of the arc the action predicts, up to its closest
+ * approach to the target. */
+static double arc_clearance(lua_State *L, const SteerArgs *a, const NsSteerAction *act)
+{
+    NsPlanPath arc;
+    NsPlanAction pa = {act->twist, fmax(act->at, 1e-4), act->duty, act->rate};
+    if (!ns_plan_path_init(&arc, &a->pose, a->kappa) || !ns_plan_path_push(&arc, &pa)) {
+        ns_plan_path_free(&arc);
+        luaL_error(L, "needlesim: out of memory");
+    }
+    double c = ns_plan_path_clearance(&arc, a->obs, a->nobs, STEER_CHECK_STEP);
+    ns_plan_path_free(&arc);
+    return c;
+}
+
+/* The helix choice towards the target, else the farthest kept waypoint at least STEER_WAY_AHEAD
+ * ahead of the tip, that it reaches within STEER_WAY_MISS with its predicted arc keeping the
+ * clearance. */
+static bool toward_waypoint(lua_State *L, const NsRunSteer *s, const SteerArgs *a,
+                            NsSteerAction *out)
+{
+    for (int i = s->way_n; i >= 0; i--) { /* the target first, then the waypoints back */
+        const double *w = i == s->way_n ? a->target : &s->way[3 * i];
+        double d[3] = {w[0] - a->pose.p[0], w[1] - a->pose.p[1], w[2] - a->pose.p[2]};
+        if (d[0] * a->pose.t[0] + d[1] * a->pose.t[1] + d[2] * a->pose.t[2] < STEER_WAY_AHEAD)
+            continue;
+        NsSteerParams sp = ns_steer_default(a->kappa);
+        NsSteerAction act;
+        char err[256];
+        if (ns_steer_choose(&sp, &a->pose, w, &act, err, sizeof err) != 0)
+            continue;
+        if (act.miss <= STEER_WAY_MISS && arc_clearance(L, a, &act) >= a->clearance) {
+            *out = act;
+            return true;
+        }
+    }
+    return false;
+}
+
+/* An RRT from the pose; its nodes' positions become the kept waypoints (the target last).
+ * false when none is found (the waypoints then dropped). */
+static bool replan_rrt(NsRun *r, const SteerArgs *a, char *err, int err_sz)
+{
+    NsRunSteer *s = &r->steer;
+    NsRrtParams prm = rrt_params(r, a);
+    prm.kappa = STEER_RRT_MARGIN * a->kappa; /* a path the needle can follow with some to spare */
+    NsPlanPath path;
+    s->way_n = 0;
+    if (ns_rrt_plan(&prm, a->obs, a->nobs, &a->pose, a->target, &path, NULL, err, err_sz) != 0)
+        return false;
+    bool path_found = true;
+    double *w = realloc(s->way, sizeof *w * 3 * (size_t)(path.action_count + 1));
+    if (w) {
+        s->way = w;
+        for (int i = 1; i < path.action_count; i++) /* the last node: the target's place */
+            memcpy(&w[3 * (i - 1)], path.poses[i].p, sizeof(double) * 3);
+        s->way_n = path.action_count - 1;
+    }
+    ns_plan_path_free(&path);
+    return s->way_n > 0 || path_found;
+}
+
 /* planner.choose(args) -> {twist, duty, rate, miss, fallback}: the action to apply now. With
  * method "rrt" the first action of an RRT planned from the pose (the helix choice when the
  * RRT finds no path: fallback = true). Counts one replan and its planning time. */
@@ -192,41 +260,34 @@ static int l_choose(lua_State *L)
     char err[512];
     double t0 = ns_wall_s();
     NsSteerAction act = {0};
-    bool fallback = a.rrt;
+    bool fallback = false; /* the RRT found no path: the direct choice is taken */
     NsSteerParams sp = ns_steer_default(a.kappa);
     if (ns_steer_choose(&sp, &a.pose, a.target, &act, err, sizeof err) != 0)
         luaL_error(L, "sim.planner: %s", err);
+    /* A dead band: the bevel as it is (no twist, its own duty cycle) unless turning it gains
+     * more than STEER_TWIST_GAIN (or 2% of the distance, near the target) of predicted miss. Near
+     * the line to the target the best angle swings with the tip's jitter, and each swing costs a
+     * twist that shakes the tissue. */
+    NsSteerParams hold = sp;
+    hold.angle_count = 1;
+    hold.exact_angle = false;
+    NsSteerAction still;
+    double far = sqrt((a.target[0] - a.pose.p[0]) * (a.target[0] - a.pose.p[0]) +
+                      (a.target[1] - a.pose.p[1]) * (a.target[1] - a.pose.p[1]) +
+                      (a.target[2] - a.pose.p[2]) * (a.target[2] - a.pose.p[2]));
+    if (ns_steer_choose(&hold, &a.pose, a.target, &still, err, sizeof err) == 0 &&
+        still.miss <= act.miss + fmin(STEER_TWIST_GAIN, STEER_TWIST_GAIN_PER_M * far))
+        act = still;
     if (a.rrt && a.nobs > 0) {
-        /* The helix choice's arc as predicted, to its closest approach: when it keeps the
-         * clearance there is nothing to plan around (the RRT would try the same arc first,
-         * but only where the target is within its curvature). */
-        NsPlanPath arc;
-        NsPlanAction pa = {act.twist, fmax(act.at, 1e-4), act.duty, act.rate};
-        if (!ns_plan_path_init(&arc, &a.pose, a.kappa) || !ns_plan_path_push(&arc, &pa)) {
-            ns_plan_path_free(&arc);
-            luaL_error(L, "needlesim: out of memory");
-        }
-        double c = ns_plan_path_clearance(&arc, a.obs, a.nobs, STEER_CHECK_STEP);
-        ns_plan_path_free(&arc);
-        if (c >= a.clearance)
-            fallback = false;
-    } else if (a.rrt) {
-        fallback = false;
-    }
-    if (fallback) {
-        NsRrtParams prm = rrt_params(r, &a);
-        NsPlanPath path;
-        if (ns_rrt_plan(&prm, a.obs, a.nobs, &a.pose, a.target, &path, NULL, err, sizeof err) ==
-            0) {
-            if (path.action_count > 0) {
-                act.twist = path.actions[0].twist;
-                act.duty = path.actions[0].duty;
-                act.rate = path.actions[0].rate;
-                act.miss = path.error;
-                fallback = false;
-            }
-            ns_plan_path_free(&path);
-        }
+        /* Along an RRT path around the obstacles, through its waypoints (the nodes' positions,
+         * the target last): towards the farthest one ahead that the helix choice reaches with
+         * its predicted arc clear. The path is kept from one replan to the next (a tree planned
+         * afresh every time gives a different first action each time, and the needle twists
+         * back and forth); it is planned again, from the pose, only when no waypoint ahead can
+         * be reached clear of the obstacles. */
+        fallback = !toward_waypoint(L, s, &a, &act);
+        if (fallback && replan_rrt(r, &a, err, sizeof err))
+            fallback = !toward_waypoint(L, s, &a, &act);
     }
     double ms = 1e3 * (ns_wall_s() - t0);
     if (ns_series_push(&s->ms, ms) != 0)

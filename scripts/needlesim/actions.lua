@@ -469,7 +469,7 @@ function act.steer(t)
     -- the tip's path: arc length travelled [m] and positions, for the path's own tangent (a
     -- chord over the last CHORD metres: the tip's last edge leans towards the bevel more than
     -- the path it cuts, so its direction overstates the curvature)
-    local CHORD, PRIOR = 4e-3, 10e-3
+    local CHORD, PRIOR = 6e-3, 10
     local trail_p = { copy3(sim.tip) }
     local function chord()
         local n = #trail_p
@@ -498,10 +498,14 @@ function act.steer(t)
     local function track()
         P.track { tip = sim.tip, avoid = f.avoid, target_index = index }
     end
-    -- The target is no longer ahead of the tip, or the depth is spent.
+    -- The target is no longer ahead of the tip, along its direction or along the path it has
+    -- cut (a tip that turned sideways round the target never has it behind its direction), or
+    -- the depth is spent.
     local function done()
         local q, p = sim.targets[f.target], sim.tip
-        return dot({ q[1] - p[1], q[2] - p[2], q[3] - p[3] }, dir()) <= 0 or sim.depth >= max_depth
+        local e = { q[1] - p[1], q[2] - p[2], q[3] - p[3] }
+        local c = chord()
+        return dot(e, dir()) <= 0 or (c and dot(e, c) <= 0) or sim.depth >= max_depth
     end
     local watch = stall_watch("act.steer: the needle does not advance", 1, max_depth)
     -- Inserts `len` [m] of tip travel with the base turning at `spin` [rad/s] for `n` steps
@@ -546,18 +550,21 @@ function act.steer(t)
             advance(0, a.duty * seg / (n * sim.dt), 2 * math.pi / (n * sim.dt), n)
         end
         stop()
-        -- the curvature seen while the bevel was held (the model's is not the tissue's): the
-        -- path's turn towards the bevel over the segment, signed, so that the jitter of the
-        -- tip's position cancels in the sum instead of adding up
+        -- The curvature seen while the bevel was held (the model's is not the tissue's): the
+        -- path's turn m towards the bevel over the segment (signed, so that the jitter of the
+        -- tip's position cancels instead of adding up) against the held length h, by least
+        -- squares: kappa = sum(h m) / sum(h^2). Segments spun nearly all the way (h small) then
+        -- weigh little: their turn is mostly noise, and as a ratio of sums they fed the
+        -- estimate's own growth (a higher estimate, more spinning, a smaller h). The sums start
+        -- as if PRIOR segments held all the way had turned at the model's curvature.
         local c1 = chord()
         if c0 and c1 then
-            turned = turned + dot({ c1[1] - c0[1], c1[2] - c0[2], c1[3] - c0[3] }, b0)
-            held = held + h
+            turned = turned + h * dot({ c1[1] - c0[1], c1[2] - c0[2], c1[3] - c0[3] }, b0)
+            held = held + h * h
         end
-        -- shrunk towards the model's as if PRIOR metres had been seen turning at it, so the
-        -- first few millimetres' noise does not swing it
-        kappa = math.max(0.25 * P.kappa, math.min(4 * P.kappa,
-            (turned + P.kappa * PRIOR) / (held + PRIOR)))
+        local prior = PRIOR * every * every
+        kappa = math.max(0.5 * P.kappa, math.min(2 * P.kappa,
+            (turned + P.kappa * prior) / (held + prior)))
     end
     stop()
     local q, p = sim.targets[f.target], sim.tip
