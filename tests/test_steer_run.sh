@@ -66,11 +66,12 @@ scenario plan 'local p = ns.plan { target = "goal", avoid = { "near rod", "far r
 expect_error() {
     scenario bad "$3"
     "$BIN" run "$TMP/bad.lua" --no-render --quiet --steps 2 -o "$TMP/bad" >"$OUT" 2>"$ERR"
-    local rc=$?
+    local rc=$? line
+    line=$(($(grep -n '^    script = function()' "$TMP/bad.lua" | cut -d: -f1) + 1))
     if [ $rc = 0 ]; then
         fail "$1" "exit 0"
-    elif [ "$(wc -l <"$ERR")" != 1 ] || ! grep -qF -- "$TMP/bad.lua:62: $2" "$ERR"; then
-        fail "$1" "stderr is not one line holding 'bad.lua:62: $2'"
+    elif [ "$(wc -l <"$ERR")" != 1 ] || ! grep -qF -- "$TMP/bad.lua:$line: $2" "$ERR"; then
+        fail "$1" "stderr is not one line holding 'bad.lua:$line: $2'"
     else
         pass "$1"
     fi

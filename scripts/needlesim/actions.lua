@@ -397,7 +397,7 @@ local function avoid_list(name, avoid, level)
     for i, n in ipairs(avoid) do
         if not known[n] then
             error(fmt("%s: avoid[%d] = %s is not an obstacle of the scenario (obstacles: %s)",
-                name, i, tostring(n), #sim.planner.obstacles > 0
+                label(name), i, tostring(n), #sim.planner.obstacles > 0
                 and table.concat(sim.planner.obstacles, ", ") or "none"), level)
         end
         out[i] = n
