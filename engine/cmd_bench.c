@@ -38,7 +38,9 @@ static const char bench_usage[] =
     "                       [--set KEY=VALUE]... [--compare NAME] [--repeat N] [--json]\n"
     "                       [--snapshot]\n"
     "       needlesim bench --live SCENARIO.lua [--seconds S] [--json] (a live session)\n"
-    "       needlesim bench --dose [--repeat N] [--threads N] [--json] (TG-43 dose grid)\n";
+    "       needlesim bench --dose [--repeat N] [--threads N] [--json] (TG-43 dose grid)\n"
+    "       needlesim bench --planning [--layouts N] [--seed S] [--json] (open against closed\n"
+    "                       loop steering over generated layouts: docs/planning.md)\n";
 
 #define BENCH_MAX_REPEAT 100
 
@@ -65,8 +67,8 @@ static void bench_stats_json(NsJson *j, const NsRun *r)
     ns_json_int(j, r->factorizations);
 }
 
-/* One bench run of o's scenario with the given solver into r (initialised here). */
-static int bench_run(const NsRunOpts *o, int solver, bool log_tips, NsRun *r, char *err, int err_sz)
+/* One bench run of o's scenario with the given solver into r (initialised here; commands.h). */
+int ns_bench_run(const NsRunOpts *o, int solver, bool log_tips, NsRun *r, char *err, int err_sz)
 {
     memset(r, 0, sizeof *r);
     r->sim_ref = r->act_ref = r->co_ref = LUA_NOREF;
@@ -439,6 +441,9 @@ int ns_cmd_bench(int argc, char **argv)
     for (int i = 1; i < argc; i++)
         if (strcmp(argv[i], "--dose") == 0)
             return ns_bench_dose(argc, argv);
+    for (int i = 1; i < argc; i++)
+        if (strcmp(argv[i], "--planning") == 0)
+            return ns_bench_planning(argc, argv);
     NsRunOpts o;
     memset(&o, 0, sizeof o);
     o.threads = 1;
@@ -468,7 +473,7 @@ int ns_cmd_bench(int argc, char **argv)
         if (repeat > 1 && !json)
             fprintf(stderr, "needlesim bench: repeat %d of %d\n", rep + 1, repeat);
         for (int k = 0; k < nruns && rc == 0; k++) {
-            rc = bench_run(&o, k ? compare : o.solver, nruns == 2, &runs[k], err, sizeof err);
+            rc = ns_bench_run(&o, k ? compare : o.solver, nruns == 2, &runs[k], err, sizeof err);
             if (rc && nruns == 2) { /* say which of the two failed: err gets a prefix */
                 char pre[64];
                 int np =

@@ -24,6 +24,7 @@
 #include "obstacle.h"
 #include "out_files.h"
 #include "path.h"
+#include "plan_obs.h"
 #include "rrt.h"
 #include "run_spec.h"
 #include "scenario.h"
@@ -49,12 +50,6 @@ typedef struct PlanOpt {
     double clearance; /* [m] */
     unsigned long long seed;
 } PlanOpt;
-
-typedef struct PlanObs {
-    NsPlanObstacle *obs; /* (count) */
-    NsShape **shapes;    /* (count), NULL where the bounding box stands in */
-    int count;
-} PlanObs;
 
 static int usage_error(const char *fmt, const char *arg)
 {
@@ -120,77 +115,6 @@ static int parse_args(int argc, char **argv, PlanOpt *o)
     return 0;
 }
 
-/* The bounding box of region r's tets, or of the whole mesh for r < 0 [m]. */
-static bool mesh_box(const NsMesh *m, int r, double lo[3], double hi[3])
-{
-    bool any = false;
-    for (int k = 0; k < 3; k++) {
-        lo[k] = INFINITY;
-        hi[k] = -INFINITY;
-    }
-    for (int t = 0; t < m->tet_slots; t++) {
-        if (!ns_mesh_tet_alive(m, t) || (r >= 0 && m->tet_region[t] != r))
-            continue;
-        for (int c = 0; c < 4; c++) {
-            const double *x = &m->x[3 * m->tet_node[4 * t + c]];
-            for (int k = 0; k < 3; k++) {
-                lo[k] = fmin(lo[k], x[k]);
-                hi[k] = fmax(hi[k], x[k]);
-            }
-        }
-        any = true;
-    }
-    return any;
-}
-
-static void obs_free(PlanObs *po)
-{
-    for (int i = 0; i < po->count; i++)
-        if (po->shapes && po->shapes[i])
-            ns_shape_release(po->shapes[i]);
-    free(po->shapes);
-    free(po->obs);
-    memset(po, 0, sizeof *po);
-}
-
-/* The scenario's obstacles: each region's shape as written, else its tets' bounding box. */
-static int obs_make(const NsScenario *sc, const NsRunSpec *spec, PlanObs *po, char *err, int err_sz)
-{
-    memset(po, 0, sizeof *po);
-    int n = spec->obstacle_count;
-    po->obs = calloc((size_t)(n > 0 ? n : 1), sizeof *po->obs);
-    po->shapes = calloc((size_t)(n > 0 ? n : 1), sizeof *po->shapes);
-    if (!po->obs || !po->shapes) {
-        obs_free(po);
-        snprintf(err, (size_t)err_sz, "needlesim plan: out of memory");
-        return -1;
-    }
-    for (int i = 0; i < n; i++) {
-        int r = spec->obstacles[i].region;
-        char why[512];
-        NsShape *s = ns_scenario_region_shape(sc, r, why, sizeof why);
-        NsPlanObstacle *o = &po->obs[i];
-        if (s) {
-            po->shapes[i] = s;
-            memset(o, 0, sizeof *o);
-            o->kind = NS_PLAN_SHAPE;
-            o->shape = s;
-        } else {
-            double lo[3], hi[3];
-            if (!mesh_box(&sc->mesh, r, lo, hi)) {
-                snprintf(err, (size_t)err_sz, "%s: obstacle '%s': its region has no tets", sc->path,
-                         spec->obstacles[i].name);
-                obs_free(po);
-                return -1;
-            }
-            *o = ns_plan_box(lo, hi);
-        }
-        o->name = spec->obstacles[i].name;
-        po->count = i + 1;
-    }
-    return 0;
-}
-
 typedef struct PlanResult {
     NsPlanPath path;
     double ms, kappa;
@@ -206,7 +130,7 @@ static double now_ms(void)
     return 1e3 * (double)t.tv_sec + 1e-6 * (double)t.tv_nsec;
 }
 
-static int plan(const PlanOpt *opt, const NsScenario *sc, const PlanObs *po,
+static int plan(const PlanOpt *opt, const NsScenario *sc, const NsPlanObs *po,
                 const NsPlanPose *start, PlanResult *res, char *err, int err_sz)
 {
     const NsRunTarget *tg = res->target;
@@ -214,7 +138,7 @@ static int plan(const PlanOpt *opt, const NsScenario *sc, const PlanObs *po,
     double t0 = now_ms();
     if (strcmp(opt->method, "rrt") == 0) {
         double lo[3], hi[3];
-        mesh_box(&sc->mesh, -1, lo, hi);
+        ns_plan_mesh_box(&sc->mesh, -1, lo, hi);
         NsRrtParams prm = ns_rrt_default(res->kappa, lo, hi);
         prm.clearance = opt->clearance;
         prm.tolerance = tg->tolerance;
@@ -243,7 +167,7 @@ static int plan(const PlanOpt *opt, const NsScenario *sc, const PlanObs *po,
     return 0;
 }
 
-static void write_json(FILE *f, const PlanOpt *opt, const NsScenario *sc, const PlanObs *po,
+static void write_json(FILE *f, const PlanOpt *opt, const NsScenario *sc, const NsPlanObs *po,
                        const PlanResult *res, const double *xyz, int npts)
 {
     NsJson j;
@@ -317,7 +241,7 @@ static void write_json(FILE *f, const PlanOpt *opt, const NsScenario *sc, const 
     fputc('\n', f);
 }
 
-static void print_text(const PlanOpt *opt, const NsScenario *sc, const PlanObs *po,
+static void print_text(const PlanOpt *opt, const NsScenario *sc, const NsPlanObs *po,
                        const PlanResult *res)
 {
     printf("plan: %s, target '%s', method %s\n", sc->name, res->target->name, opt->method);
@@ -335,7 +259,7 @@ static void print_text(const PlanOpt *opt, const NsScenario *sc, const PlanObs *
 }
 
 /* DIR/plan.json through DIR/.plan.json.part (DIR made when absent, its parent must exist). */
-static int write_out(const char *dir, const PlanOpt *opt, const NsScenario *sc, const PlanObs *po,
+static int write_out(const char *dir, const PlanOpt *opt, const NsScenario *sc, const NsPlanObs *po,
                      const PlanResult *res, const double *xyz, int npts)
 {
     struct stat sb;
@@ -409,7 +333,7 @@ static int plan_loaded(const PlanOpt *opt, const NsScenario *sc, const NsRunSpec
         return 1;
     }
     /* the arc model's curvature, k_c tan(psi) (docs/needle.md) */
-    res.kappa = spec->arc_curvature * tan(spec->bevel_deg * M_PI / 180.0);
+    res.kappa = ns_plan_model_kappa(spec);
     NsPlanPose start;
     if (!ns_plan_pose_make(spec->entry_point, spec->entry_dir,
                            spec->has_bevel_toward ? spec->bevel_toward : NULL, &start)) {
@@ -417,15 +341,15 @@ static int plan_loaded(const PlanOpt *opt, const NsScenario *sc, const NsRunSpec
         return 1;
     }
     char err[1536];
-    PlanObs po;
-    if (obs_make(sc, spec, &po, err, sizeof err) != 0) {
+    NsPlanObs po;
+    if (ns_plan_obs_make(sc, spec, &po, err, sizeof err) != 0) {
         fprintf(stderr, "%s\n", err);
         return 1;
     }
     int rc = plan(opt, sc, &po, &start, &res, err, sizeof err);
     if (rc != 0) {
         fprintf(stderr, "needlesim plan: %s\n", err);
-        obs_free(&po);
+        ns_plan_obs_free(&po);
         return 1;
     }
     double *xyz = NULL;
@@ -450,7 +374,7 @@ static int plan_loaded(const PlanOpt *opt, const NsScenario *sc, const NsRunSpec
     }
     free(xyz);
     ns_plan_path_free(&res.path);
-    obs_free(&po);
+    ns_plan_obs_free(&po);
     return rc;
 }
 

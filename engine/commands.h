@@ -3,6 +3,8 @@
 #ifndef NS_COMMANDS_H
 #define NS_COMMANDS_H
 
+#include <stdbool.h>
+
 int ns_cmd_check(int argc, char **argv);
 int ns_cmd_validate(int argc, char **argv);
 int ns_cmd_run(int argc, char **argv);
@@ -13,5 +15,14 @@ int ns_cmd_plan(int argc, char **argv);
 int ns_bench_live(int argc, char **argv);
 /* engine/bench_dose.c: `needlesim bench --dose` (ns_cmd_bench passes it on) */
 int ns_bench_dose(int argc, char **argv);
+/* engine/bench_planning.c: `needlesim bench --planning` (ns_cmd_bench passes it on) */
+int ns_bench_planning(int argc, char **argv);
+struct NsRun;
+struct NsRunOpts;
+/* One bench run of o's scenario (o->sets applied) with the given solver into r (initialised
+ * here; free it with ns_run_free even on failure): the run's loop until its script ends or
+ * o->steps. */
+int ns_bench_run(const struct NsRunOpts *o, int solver, bool log_tips, struct NsRun *r, char *err,
+                 int err_sz);
 
 #endif

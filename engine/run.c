@@ -689,6 +689,8 @@ void ns_run_free(NsRun *r)
         luaL_unref(L, LUA_REGISTRYINDEX, r->act_ref);
     if (L && r->co_ref != LUA_NOREF)
         luaL_unref(L, LUA_REGISTRYINDEX, r->co_ref);
+    if (r->have_steer)
+        ns_run_steer_free(&r->steer);
     if (r->have_c)
         ns_coupled_free(&r->c);
     if (r->have_rod)

@@ -11,6 +11,7 @@
 #include "control_log.h"
 #include "coupling.h"
 #include "json.h"
+#include "plan_obs.h"
 #include "quality_watch.h"
 #include "rod.h"
 #include "run_render.h"
@@ -51,6 +52,25 @@ typedef struct NsTickView {
     int more;      /* the script had more to do after the tick */
     NsControl ctl; /* the controls it set */
 } NsTickView;
+
+/* act.steer and ns.plan in a run (engine/run_steer.c): the obstacles as distances, the model's
+ * curvature, and what the report's `steering` says. */
+typedef struct NsRunSteer {
+    NsPlanObs obs;
+    bool have_obs; /* else obs_err says why */
+    char obs_err[256];
+    double kappa;           /* the model's curvature k_c tan(psi) [1/m] */
+    double lo[3], hi[3];    /* the tissue's bounding box as built: the RRT's workspace [m] */
+    NsSeries ms;            /* planning time per replan [ms] (measured only) */
+    int replans, fallbacks; /* fallbacks: RRT replans that found no path (the helix choice) */
+    double min_clear;       /* least distance from the tip to an avoided obstacle [m] */
+    double kappa_estimate;  /* the curvature the last replan predicted with [1/m] */
+    bool used, rrt;
+    int target;    /* the steered-to target (-1: none) */
+    bool *avoided; /* (obstacle_count): named in an avoid list */
+    double *way;   /* (way_n x 3) the kept RRT path's waypoints [m] */
+    int way_n;
+} NsRunSteer;
 
 /* ---- the model ---- */
 
@@ -149,6 +169,8 @@ typedef struct NsRun {
     /* report.json: more keys at its end (a live session's `live`), or NULL */
     void (*report_extra)(NsJson *j, void *ctx);
     void *report_ctx;
+    NsRunSteer steer;
+    bool have_steer;
 } NsRun;
 
 enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT, EVENT_REENTRY };
@@ -205,6 +227,11 @@ int ns_run_script_start(NsRun *r, char *err, int err_sz);
 int ns_run_script_tick(NsRun *r, double t, int exited, const NsControl *given, int *more,
                        NsControl *ctl, char *err, int err_sz);
 int ns_run_script_replay_tick(NsRun *r, long k, char *err, int err_sz);
+/* engine/run_steer.c: `sim.planner` (act.steer, ns.plan) and the report's `steering` */
+int ns_run_steer_setup(NsRun *r, char *err, int err_sz);
+void ns_run_steer_free(NsRunSteer *s);
+void ns_run_steer_push(lua_State *L, NsRun *r);
+void ns_run_steer_report(NsJson *j, const NsRun *r, const NsRunResults *res);
 /* engine/run_checkpoint.c: checkpoints (docs/checkpoints.md) */
 int ns_run_views_push(NsRun *r, const NsTickView *v, const double *tx);
 /* --resume: reads the checkpoint's header and takes the run's settings from it (--set, --steps,

@@ -389,6 +389,7 @@ int ns_run_write_report(NsRun *r, const NsRunResults *res, uint64_t hash, char *
     char h[32];
     snprintf(h, sizeof h, "%016llx", (unsigned long long)hash);
     report_render(&j, r);
+    ns_run_steer_report(&j, r, res);
     if (r->report_extra)
         r->report_extra(&j, r->report_ctx);
     ns_json_key(&j, "state_hash");

@@ -88,6 +88,9 @@ static int start_body(lua_State *L)
     set_num(L, lua_gettop(L), "base_speed", NS_LIMIT_BASE_SPEED);
     set_num(L, lua_gettop(L), "twist_angle", NS_LIMIT_TWIST_ANGLE);
     lua_rawset(L, -3);
+    lua_pushstring(L, "planner"); /* act.steer's and ns.plan's planners (run_steer.c) */
+    ns_run_steer_push(L, r);
+    lua_rawset(L, -3);
     lua_pushvalue(L, -1);
     r->sim_ref = luaL_ref(L, LUA_REGISTRYINDEX);
     int sim = lua_gettop(L);
@@ -116,6 +119,11 @@ int ns_run_script_start(NsRun *r, char *err, int err_sz)
 {
     lua_State *L = ns_lua_state(r->sc.lua);
     TickIO io = {.r = r};
+    if (!r->have_steer) { /* before the phase: it calls into the scenario's Lua state */
+        if (ns_run_steer_setup(r, err, err_sz) != 0)
+            return -1;
+        r->have_steer = true;
+    }
     /* One budget for the whole of the run's script and on_tick calls (sim/ns_limits.h). */
     ns_lua_begin_phase(r->sc.lua, "a tick of the run's script", NS_LIMIT_RUN_INSTRUCTIONS, 0.0,
                        NS_LIMIT_TICK_SECONDS);

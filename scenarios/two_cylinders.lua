@@ -12,7 +12,8 @@
 --   * CSG: each rod is a long cylinder intersected with the block, so it ends flush with the
 --     block's faces instead of sticking out of it;
 --   * bounds: the lattice is anchored at the block's corner, so its faces stay flat.
---   * obstacles (the rods' regions), entry.bevel_toward, and steering by act.twist.
+--   * obstacles (the rods' regions), entry.bevel_toward, and steering by act.twist;
+--   * or (--set steer=true) closed-loop steering around the rods by act.steer.
 --
 -- The paper's mesh had 3,248 tets and 813 nodes; this one is of the same size
 -- (`needlesim check scenarios/two_cylinders.lua`).
@@ -21,6 +22,9 @@ local act = require "needlesim.actions"
 
 local L, W, H = 0.10, 0.06, 0.04 -- block size along x (insertion), y, z [m]
 local R = 0.006 -- rod radius [m]
+-- --set steer=true: closed-loop steering (act.steer, docs/planning.md) instead of the scripted
+-- twist: an RRT around both rods, replanned every 2 mm from the tip's pose.
+local STEER = ns.param("steer", false)
 
 local block = ns.shape.box { center = { L / 2, W / 2, H / 2 }, size = { L, W, H } }
 
@@ -59,6 +63,10 @@ return ns.scenario {
         { name = "far rod", region = "far rod" },
     },
     script = function()
+        if STEER then
+            act.steer { target = "goal", avoid = { "near rod", "far rod" }, method = "rrt" }
+            return
+        end
         -- Up past the far rod, then half a turn to level off towards the goal.
         act.insert { speed = 0.01, depth = 0.065 }
         act.twist { angle = math.pi }

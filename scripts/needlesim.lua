@@ -830,6 +830,18 @@ end
 
 -- Parameters -------------------------------------------------------------------------------
 
+--- ns.plan{target, avoid, clearance, method, seed}: a plan from the needle's tip as it is now
+-- to the target named `target` where the tissue has carried it, around the obstacles named in
+-- `avoid` (keeping `clearance` [m], default 1 mm), on the kinematic model (plan/;
+-- docs/planning.md): method "rrt" (default) or "helix". Nothing is run. Returns {ok, path =
+-- {{x, y, z}, ...} (every 1 mm), actions = {{twist [rad], insert [m], duty, rate [rad/m]}, ...},
+-- error_mm, clearance_mm, length_mm, planning_ms} ({ok = false, message} when no path is
+-- found). Only while the scenario runs: in its script or on_tick.
+function ns.plan(t)
+    local plan = require("needlesim.actions")._plan(t) -- not a tail call: errors name the caller
+    return plan
+end
+
 --- ns.param(key, default): a scenario parameter that `needlesim run --set key=value` can change.
 -- The value takes the type of `default` (a number, a boolean or a string); without --set it is
 -- `default`. A --set key that no ns.param call reads is an error, so a misspelt key is caught.

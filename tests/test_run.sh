@@ -94,7 +94,7 @@ fi
 # Every other shipped scenario runs and writes a report whose fields are all finite, its mesh's
 # worst dihedral angle over every step at least 5 deg.
 if [ "$PART" = scenarios ]; then
-    for sc in tutorial two_cylinders phantom_single_bend phantom_double_bend; do
+    for sc in tutorial two_cylinders phantom_single_bend phantom_double_bend steer_around_vessel; do
         "$BIN" run "$SRC/scenarios/$sc.lua" --no-render -o "$TMP/$sc" --quiet >/dev/null 2>"$TMP/err_$sc"
         rc=$?
         if [ $rc = 0 ] && python3 - "$TMP/$sc/report.json" "$TMP/finite.py" <<'PY' >"$TMP/py_$sc" 2>&1; then

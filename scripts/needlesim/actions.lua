@@ -41,16 +41,22 @@ local function fields(t, name, known)
     end
 end
 
-local function number(t, name, k, test, what, default)
+-- "act.NAME", or NAME itself when it has a dot (ns.plan's fields are checked here too).
+local function label(name)
+    return name:find(".", 1, true) and name or "act." .. name
+end
+
+local function number(t, name, k, test, what, default, level)
+    level = level or 3
     local v = t[k]
     if v == nil and default ~= nil then
         return default
     end
     if v == nil then
-        error(fmt("act.%s: missing required field '%s' (a number %s)", name, k, what), 3)
+        error(fmt("%s: missing required field '%s' (a number %s)", label(name), k, what), level)
     end
     if not finite(v) or not test(v) then
-        error(fmt("act.%s: %s must be a number %s (got %s)", name, k, what, tostring(v)), 3)
+        error(fmt("%s: %s must be a number %s (got %s)", label(name), k, what, tostring(v)), level)
     end
     return v
 end
@@ -102,6 +108,16 @@ local function stall_watch(message, sign, wanted)
     end
 end
 
+-- The scenario's target names, sorted and joined ("none" without any), for messages.
+local function target_list()
+    local names = {}
+    for k in pairs(sim.targets) do
+        names[#names + 1] = k
+    end
+    table.sort(names)
+    return #names > 0 and table.concat(names, ", ") or "none"
+end
+
 -- The depth still to go to `depth`, or to the target named `to` as it is now (the target moves
 -- with the tissue): the target's distance ahead of the tip along the tip's direction, what an
 -- operator reads off the ultrasound image. Exactly one of the two is given.
@@ -120,13 +136,8 @@ local function goal(t, name)
     end
     local to = t.to
     if type(to) ~= "string" or sim.targets[to] == nil then
-        local names = {}
-        for k in pairs(sim.targets) do
-            names[#names + 1] = k
-        end
-        table.sort(names)
         error(fmt("act.%s: 'to' must name a target of the scenario (got %s; targets: %s)", name,
-            tostring(to), #names > 0 and table.concat(names, ", ") or "none"), 3)
+            tostring(to), target_list()), 3)
     end
     -- A tip direction that reverses from one step to the next (soft tissue can fold the last
     -- rod edge back for a step) is not believed: the last one that did not reverse is used, so
@@ -200,14 +211,8 @@ function act.retract(t)
     stop()
 end
 
---- act.twist{angle, rate}: turn the needle's base by `angle` [rad] (signed) at `rate` [rad/s]
--- (default pi), the insertion paused.
-function act.twist(t)
-    running()
-    fields(t, "twist", { "angle", "rate" })
-    local angle = number(t, "twist", "angle", angle_ok,
-        fmt("in [-%g, %g] [rad]", sim.limits.twist_angle, sim.limits.twist_angle))
-    local rate = number(t, "twist", "rate", rate_ok, rate_what(), math.pi)
+-- Turns the base by angle [rad] at rate [rad/s], the insertion paused (the last step slower).
+local function turn_base(angle, rate)
     local turned, sign = 0, angle < 0 and -1 or 1
     while turned < math.abs(angle) - 1e-12 do
         local w = math.min(rate, (math.abs(angle) - turned) / sim.dt)
@@ -217,6 +222,17 @@ function act.twist(t)
         tick()
     end
     stop()
+end
+
+--- act.twist{angle, rate}: turn the needle's base by `angle` [rad] (signed) at `rate` [rad/s]
+-- (default pi), the insertion paused.
+function act.twist(t)
+    running()
+    fields(t, "twist", { "angle", "rate" })
+    local angle = number(t, "twist", "angle", angle_ok,
+        fmt("in [-%g, %g] [rad]", sim.limits.twist_angle, sim.limits.twist_angle))
+    local rate = number(t, "twist", "rate", rate_ok, rate_what(), math.pi)
+    turn_base(angle, rate)
 end
 
 -- The angle [rad] about the tip's direction from the bevel's direction (m2) to the target named
@@ -352,6 +368,232 @@ function act.drop_seed(t)
     fields(t == nil and {} or t, "drop_seed", {})
     sim.control.drop_seed = true
     tick()
+end
+
+-- The target named `to` (a string naming one of sim.targets), else an error at the caller's
+-- caller's line listing the targets.
+local function target_name(name, to, level)
+    if type(to) ~= "string" or sim.targets[to] == nil then
+        error(fmt("%s: 'target' must name a target of the scenario (got %s; targets: %s)",
+            label(name), tostring(to), target_list()), level)
+    end
+    return to
+end
+
+-- A list of the scenario's obstacle names (or nil), checked.
+local function avoid_list(name, avoid, level)
+    if avoid == nil then
+        return {}
+    end
+    local known = {}
+    for _, n in ipairs(sim.planner.obstacles) do
+        known[n] = true
+    end
+    if type(avoid) ~= "table" then
+        error(fmt("%s: 'avoid' must be a list of obstacle names (got %s)", label(name),
+            tostring(avoid)), level)
+    end
+    local out = {}
+    for i, n in ipairs(avoid) do
+        if not known[n] then
+            error(fmt("%s: avoid[%d] = %s is not an obstacle of the scenario (obstacles: %s)",
+                label(name), i, tostring(n), #sim.planner.obstacles > 0
+                and table.concat(sim.planner.obstacles, ", ") or "none"), level)
+        end
+        out[i] = n
+    end
+    return out
+end
+
+local function method_field(name, m, level)
+    if m == nil then
+        return nil
+    end
+    if m ~= "helix" and m ~= "rrt" then
+        error(fmt("%s: method must be \"helix\" or \"rrt\" (got %s)", label(name), tostring(m)),
+            level)
+    end
+    return m
+end
+
+local function dot(a, b) return a[1] * b[1] + a[2] * b[2] + a[3] * b[3] end
+local function copy3(a) return { a[1], a[2], a[3] } end
+
+-- The planners' common fields from a steer or plan call, checked; `extra`: the calls between
+-- the action and the script's line (0 for act.steer, 1 for ns.plan).
+local function plan_fields(t, name, extra)
+    local f, level = {}, 4 + extra
+    f.target = target_name(name, t.target, level)
+    f.avoid = avoid_list(name, t.avoid, level)
+    f.clearance = number(t, name, "clearance", GE0, ">= 0 [m]", 1e-3, level)
+    f.seed = number(t, name, "seed", function(x) return x >= 0 and x <= 1e9 and x % 1 == 0 end,
+        "integer in 0..1e9", 1, level)
+    f.method = method_field(name, t.method, level)
+    return f
+end
+
+--- act.steer{target, avoid, clearance, replan_every, max_depth, method, speed, twist_rate,
+-- seed, tolerance}: closed-loop steering (Hauser et al. 2009; docs/planning.md). Every
+-- `replan_every` [m] of insertion (default 2 mm) it reads the tip's pose (position, direction,
+-- bevel direction) and where the tissue has carried the target named `target`, asks the
+-- planner for the twist and duty cycle whose predicted arc passes closest to it ("helix", the
+-- default) or for the first action of an RRT around the obstacles named in `avoid` planned
+-- from there ("rrt", keeping `clearance` [m] from them, default 1 mm), turns the base by the
+-- twist (at `twist_rate` [rad/s], default 4 pi, the insertion paused), and inserts at `speed`
+-- [m/s] (default 0.01): the bevel held for (1 - duty) of the segment, then spun one whole turn
+-- over the rest (duty-cycled spinning). The curvature the planner predicts with is estimated
+-- from the tip's measured turning while the bevel was held. It stops when the tip passes its
+-- closest approach to the target (the target no longer ahead of it) or at `max_depth` [m] of
+-- depth (default: the depth now plus 1.5 x the distance to the target). Returns the tip's
+-- distance to the target at the end [m].
+function act.steer(t)
+    running()
+    fields(t, "steer", { "target", "avoid", "clearance", "replan_every", "max_depth", "method",
+        "speed", "twist_rate", "seed", "tolerance" })
+    local f = plan_fields(t, "steer", 0)
+    local method = f.method or "helix"
+    local every = number(t, "steer", "replan_every", function(x) return x >= 1e-4 and x <= 0.1 end,
+        "in [1e-4, 0.1] [m]", 2e-3)
+    local speed = number(t, "steer", "speed", speed_ok, speed_what(), 0.01)
+    local twist_rate = number(t, "steer", "twist_rate", rate_ok, rate_what(), 4 * math.pi)
+    local tol = number(t, "steer", "tolerance", GT0, "> 0 [m]", 1e-3)
+    local q0, p0 = sim.targets[f.target], sim.tip
+    local far = math.sqrt((q0[1] - p0[1]) ^ 2 + (q0[2] - p0[2]) ^ 2 + (q0[3] - p0[3]) ^ 2)
+    local max_depth = number(t, "steer", "max_depth", GT0, "> 0 [m]", sim.depth + 1.5 * far)
+    local P = sim.planner
+    local index = 0
+    for i, n in ipairs(P.target_names or {}) do
+        if n == f.target then index = i end
+    end
+    local kappa, turned, held = P.kappa, 0, 0
+    -- the tip's path: arc length travelled [m] and positions, for the path's own tangent (a
+    -- chord over the last CHORD metres: the tip's last edge leans towards the bevel more than
+    -- the path it cuts, so its direction overstates the curvature)
+    local CHORD, PRIOR = 6e-3, 10
+    local trail_p = { copy3(sim.tip) }
+    local function chord()
+        local n = #trail_p
+        local b, k, c, l = trail_p[n], n, { 0, 0, 0 }, 0
+        while k > 1 and l < CHORD do -- back until the chord is CHORD long (not travel: jitter)
+            k = k - 1
+            local a = trail_p[k]
+            c = { b[1] - a[1], b[2] - a[2], b[3] - a[3] }
+            l = math.sqrt(dot(c, c))
+        end
+        if l < 0.5 * CHORD then
+            return nil
+        end
+        return { c[1] / l, c[2] / l, c[3] / l }
+    end
+    local last = copy3(sim.tip_direction)
+    -- The tip's direction, a one-step reversal not believed (as act.insert's `to`).
+    local function dir()
+        local d = sim.tip_direction
+        if dot(d, last) < 0 then
+            return last
+        end
+        last = copy3(d)
+        return last
+    end
+    local function track()
+        P.track { tip = sim.tip, avoid = f.avoid, target_index = index }
+    end
+    -- The target is no longer ahead of the tip, along its direction or along the path it has
+    -- cut (a tip that turned sideways round the target never has it behind its direction), or
+    -- the depth is spent.
+    local function done()
+        local q, p = sim.targets[f.target], sim.tip
+        local e = { q[1] - p[1], q[2] - p[2], q[3] - p[3] }
+        local c = chord()
+        return dot(e, dir()) <= 0 or (c and dot(e, c) <= 0) or sim.depth >= max_depth
+    end
+    local watch = stall_watch("act.steer: the needle does not advance", 1, max_depth)
+    -- Inserts `len` [m] of tip travel with the base turning at `spin` [rad/s] for `n` steps
+    -- (spin 0: until the length is done). Returns the tip's travel [m].
+    local function advance(len, v, spin, n)
+        local moved, prev, k = 0, copy3(sim.tip), 0
+        while not done() and ((n and k < n) or (not n and moved < len)) do
+            if sim.bone_contact then
+                return moved
+            end
+            sim.control.v_insert = v
+            sim.control.twist_rate = spin
+            tick()
+            watch()
+            track()
+            local p = sim.tip
+            local dm = math.sqrt((p[1] - prev[1]) ^ 2 + (p[2] - prev[2]) ^ 2 + (p[3] - prev[3]) ^ 2)
+            moved = moved + dm
+            prev = copy3(p)
+            trail_p[#trail_p + 1] = copy3(p)
+            k = k + 1
+        end
+        return moved
+    end
+    track()
+    local replans = 0
+    while not done() and not sim.bone_contact do
+        local a = P.choose { tip = sim.tip, t = dir(), m2 = sim.bevel_direction,
+            target = sim.targets[f.target], kappa = kappa, method = method, avoid = f.avoid,
+            clearance = f.clearance, tolerance = tol, seed = f.seed + replans }
+        replans = replans + 1
+        if math.abs(a.twist) > 1e-3 then
+            turn_base(a.twist, twist_rate)
+        end
+        local seg = math.min(every, max_depth - sim.depth)
+        local c0, b0 = chord(), copy3(sim.bevel_direction)
+        local h = advance((1 - a.duty) * seg, speed, 0)
+        -- the spun part: one whole turn over duty x seg, at most the twist-rate limit
+        local steps = math.floor(a.duty * seg / (speed * sim.dt) + 0.5)
+        if steps >= 1 and not done() then
+            local n = math.max(steps, math.ceil(2 * math.pi / (sim.limits.twist_rate * sim.dt)))
+            advance(0, a.duty * seg / (n * sim.dt), 2 * math.pi / (n * sim.dt), n)
+        end
+        stop()
+        -- The curvature seen while the bevel was held (the model's is not the tissue's): the
+        -- path's turn m towards the bevel over the segment (signed, so that the jitter of the
+        -- tip's position cancels instead of adding up) against the held length h, by least
+        -- squares: kappa = sum(h m) / sum(h^2). Segments spun nearly all the way (h small) then
+        -- weigh little: their turn is mostly noise, and as a ratio of sums they fed the
+        -- estimate's own growth (a higher estimate, more spinning, a smaller h). The sums start
+        -- as if PRIOR segments held all the way had turned at the model's curvature.
+        local c1 = chord()
+        if c0 and c1 then
+            turned = turned + h * dot({ c1[1] - c0[1], c1[2] - c0[2], c1[3] - c0[3] }, b0)
+            held = held + h * h
+        end
+        local prior = PRIOR * every * every
+        kappa = math.max(0.5 * P.kappa, math.min(2 * P.kappa,
+            (turned + P.kappa * prior) / (held + prior)))
+    end
+    stop()
+    local q, p = sim.targets[f.target], sim.tip
+    return math.sqrt((q[1] - p[1]) ^ 2 + (q[2] - p[2]) ^ 2 + (q[3] - p[3]) ^ 2)
+end
+
+-- ns.plan{target, avoid, clearance, method, seed} (needlesim.lua) while the scenario runs.
+function act._plan(t)
+    if sim == nil or sim.planner == nil then
+        error("ns.plan: plans are made only while the scenario runs (in its script or on_tick)",
+            3)
+    end
+    if type(t) ~= "table" then
+        error(fmt("ns.plan: expected a table of fields {target, avoid, clearance, method, seed} "
+            .. "(got %s)", type(t)), 3)
+    end
+    for k in pairs(t) do
+        if k ~= "target" and k ~= "avoid" and k ~= "clearance" and k ~= "method" and k ~= "seed"
+        then
+            error(fmt("ns.plan: unknown field '%s' (known: target, avoid, clearance, method, seed)",
+                tostring(k)), 3)
+        end
+    end
+    local f = plan_fields(t, "ns.plan", 1)
+    local method = f.method or "rrt"
+    local tol = 1e-3
+    return sim.planner.plan { tip = sim.tip, t = sim.tip_direction, m2 = sim.bevel_direction,
+        target = sim.targets[f.target], method = method, avoid = f.avoid,
+        clearance = f.clearance, tolerance = tol, seed = f.seed }
 end
 
 -- For the engine: binds the run's `sim` table and returns the script's coroutine (nil without

@@ -1,0 +1,119 @@
+#!/bin/bash
+# act.steer, ns.plan and `needlesim bench --planning` end to end (docs/planning.md): a steered
+# two_cylinders run's report.json has the `steering` object's keys; ns.plan returns a plan from
+# a script; bad act.steer / ns.plan fields fail with one line naming the script's file:line;
+# `bench --planning --layouts 3 --json` has the contract's keys (not the bars: 3 layouts are too
+# few to measure them; ~1 min).
+#
+# usage: tests/test_steer_run.sh NEEDLESIM_BINARY SOURCE_ROOT
+set -u
+
+BIN=${1:?usage: test_steer_run.sh NEEDLESIM_BINARY SOURCE_ROOT}
+ROOT=$(cd "${2:?usage: test_steer_run.sh NEEDLESIM_BINARY SOURCE_ROOT}" && pwd)
+export NEEDLESIM_SCRIPTS=$ROOT/scripts
+export NEEDLESIM_ASSETS=$ROOT/assets
+export OPENBLAS_NUM_THREADS=1
+
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/needlesim-steer.XXXXXX") || exit 1
+trap 'rm -rf "$TMP"' EXIT
+OUT=$TMP/stdout
+ERR=$TMP/stderr
+PASSED=0
+FAILED=0
+
+pass() {
+    echo "ok    $1"
+    PASSED=$((PASSED + 1))
+}
+
+fail() {
+    echo "FAIL  $1: $2"
+    [ -s "$ERR" ] && sed 's/^/      stderr: /' "$ERR" | head -5
+    FAILED=$((FAILED + 1))
+}
+
+# scenario NAME LUA: two_cylinders with LUA as the first lines of its script (then it ends).
+scenario() {
+    sed -e "s|^    script = function()|    script = function()\n        $2\n        do return end|" \
+        "$ROOT/scenarios/two_cylinders.lua" >"$TMP/$1.lua"
+}
+
+# the steering object after 150 steps of act.steer (RRT around both rods)
+scenario steer 'act.steer { target = "goal", avoid = { "near rod", "far rod" }, method = "rrt" }'
+"$BIN" run "$TMP/steer.lua" --no-render --quiet --steps 150 -o "$TMP/steer" >"$OUT" 2>"$ERR"
+if [ $? != 0 ]; then
+    fail "steered run" "exit non-zero"
+elif python3 - "$TMP/steer/report.json" <<'PY'; then
+import json, math, sys
+s = json.load(open(sys.argv[1]))["steering"]
+for k in ("replans", "planning_ms", "min_clearance_mm", "final_error_mm", "obstacle_entered"):
+    assert k in s, k
+assert s["replans"] >= 1 and s["planning_ms"]["median"] >= 0 and s["planning_ms"]["p95"] >= 0
+assert s["min_clearance_mm"] > 0 and math.isfinite(s["final_error_mm"])
+assert s["obstacle_entered"] is False and s["method"] == "rrt" and s["target"] == "goal"
+PY
+    pass "report.json steering keys"
+else
+    fail "report.json steering keys" "missing or wrong"
+fi
+
+# ns.plan from a script: a plan that reaches the goal with the rods' clearance
+scenario plan 'local p = ns.plan { target = "goal", avoid = { "near rod", "far rod" }, clearance = 2e-3 }; assert(p.ok and #p.actions >= 1 and #p.path > 50 and p.error_mm < 1 and p.clearance_mm >= 2, "ns.plan: a bad plan")'
+"$BIN" run "$TMP/plan.lua" --no-render --quiet --steps 2 -o "$TMP/plan" >"$OUT" 2>"$ERR" &&
+    pass "ns.plan in a script" || fail "ns.plan in a script" "exit non-zero"
+
+# expect_error NAME TEXT LUA: the run fails with one line naming the script's line and TEXT
+expect_error() {
+    scenario bad "$3"
+    "$BIN" run "$TMP/bad.lua" --no-render --quiet --steps 2 -o "$TMP/bad" >"$OUT" 2>"$ERR"
+    local rc=$? line
+    line=$(($(grep -n '^    script = function()' "$TMP/bad.lua" | cut -d: -f1) + 1))
+    if [ $rc = 0 ]; then
+        fail "$1" "exit 0"
+    elif [ "$(wc -l <"$ERR")" != 1 ] || ! grep -qF -- "$TMP/bad.lua:$line: $2" "$ERR"; then
+        fail "$1" "stderr is not one line holding 'bad.lua:$line: $2'"
+    else
+        pass "$1"
+    fi
+}
+expect_error "steer: unknown target" \
+    "act.steer: 'target' must name a target of the scenario (got nope; targets: goal)" \
+    'act.steer { target = "nope" }'
+expect_error "steer: bad method" 'act.steer: method must be "helix" or "rrt" (got x)' \
+    'act.steer { target = "goal", method = "x" }'
+expect_error "steer: unknown obstacle" "act.steer: avoid[1] = rod is not an obstacle" \
+    'act.steer { target = "goal", avoid = { "rod" } }'
+expect_error "steer: replan_every" "act.steer: replan_every must be a number in [1e-4, 0.1]" \
+    'act.steer { target = "goal", replan_every = 0 }'
+expect_error "steer: unknown field" "act.steer: unknown field 'bogus'" \
+    'act.steer { target = "goal", bogus = 1 }'
+expect_error "plan: clearance" "ns.plan: clearance must be a number >= 0 [m] (got -1)" \
+    'ns.plan { target = "goal", clearance = -1 }'
+expect_error "plan: not a table" "ns.plan: expected a table of fields" 'ns.plan(3)'
+
+# bench --planning: the contract's keys
+"$BIN" bench --planning --layouts 3 --json >"$OUT" 2>"$ERR"
+if [ $? != 0 ]; then
+    fail "bench --planning" "exit non-zero"
+elif python3 - "$OUT" <<'PY'; then
+import json, sys
+b = json.load(open(sys.argv[1]))
+assert b["layouts"] == 3 and len(b["runs"]) == 3
+for loop in ("open_loop", "closed_loop"):
+    o = b[loop]
+    for k in ("success_rate", "mean_error_mm", "min_clearance_mm", "replans"):
+        assert k in o, (loop, k)
+    assert 0 <= o["success_rate"] <= 1 and o["mean_error_mm"] >= 0
+assert b["planning_ms"]["median"] >= 0 and b["planning_ms"]["p95"] >= b["planning_ms"]["median"]
+assert b["closed_loop"]["replans"] > 0
+PY
+    pass "bench --planning --json keys"
+else
+    fail "bench --planning --json keys" "missing or wrong"
+fi
+"$BIN" bench --planning --layouts 0 >"$OUT" 2>"$ERR"
+[ $? = 2 ] && grep -qF -- "--layouts must be an integer in 1..1000" "$ERR" &&
+    pass "bench --planning --layouts 0 refused" || fail "--layouts 0" "not refused with 2"
+
+echo "$PASSED passed, $FAILED failed"
+[ "$FAILED" = 0 ]
