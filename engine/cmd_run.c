@@ -238,8 +238,8 @@ int ns_run_open_logs(NsRun *r, char *err, int err_sz)
     }
     if (rc == 0 && r->opt.replay)
         rc = ns_control_log_check_scenario(&r->replay, r->opt.replay, r->sc.name, sc_hash,
-                                           r->opt.rescore, r->note, (int)sizeof r->note, err,
-                                           err_sz);
+                                           NS_VERSION, r->opt.rescore, r->note, (int)sizeof r->note,
+                                           err, err_sz);
     if (rc == 0 && r->opt.replay) { /* the same --set values as the recording */
         bool same = r->replay.nsets == r->opt.nsets;
         for (int i = 0; same && i < r->opt.nsets; i++) {
