@@ -49,7 +49,7 @@
 static const char run_usage[] =
     "usage: needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]\n"
     "                     [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv]\n"
-    "                     [--trainee ID] [--session ID] [--rescore]\n"
+    "                     [--trainee ID] [--session ID] [--rescore] [--score-row]\n"
     "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
     "                     [--height H] [--frame-every K] [--quiet]\n"
     "                     [--checkpoint-at T FILE] [--resume FILE]\n";
@@ -188,6 +188,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             o->quiet = true;
         } else if (strcmp(a, "--rescore") == 0) {
             o->rescore = true;
+        } else if (strcmp(a, "--score-row") == 0) {
+            o->score_row = true;
         } else if (a[0] == '-' && a[1] != '\0') {
             return usage_error("unknown option '%s'", a);
         } else if (!o->scenario) {
