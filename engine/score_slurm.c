@@ -102,6 +102,7 @@ static int submit(const NsScoreOpts *o, const char *dir, int chunks)
                 array, script, chunks, o->chunk);
     pid_t pid = fork();
     if (pid == 0) {
+        dup2(2, 1); /* sbatch's "Submitted batch job N" with the progress, on stderr */
         execvp("sbatch", (char *const *)argv);
         _exit(127);
     }
