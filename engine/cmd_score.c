@@ -100,7 +100,8 @@ static int parse_args(int argc, char **argv, NsScoreOpts *o)
             return usage_error("unknown option '%s'", a);
         } else {
             if (o->nlogs == NS_SCORE_MAX_LOGS)
-                return usage_error("more than %s logs", "100000");
+                return usage_error("more than %s logs (run several batches into the same OUT)",
+                                   "10000");
             o->logs[o->nlogs++] = a;
         }
         i += valued;

@@ -12,8 +12,8 @@
 
 #include "control_log.h"
 
-#define NS_SCORE_MAX_LOGS      100000 /* logs in one batch */
-#define NS_SCORE_MAX_SCENARIOS 1000   /* .lua files looked at in --scenario-dir */
+#define NS_SCORE_MAX_LOGS      10000 /* logs in one batch (a session holds ~15 KiB) */
+#define NS_SCORE_MAX_SCENARIOS 1000  /* .lua files looked at in --scenario-dir */
 #define NS_SCORE_MAX_JOBS      64
 
 typedef struct NsScoreOpts {
