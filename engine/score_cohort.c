@@ -417,32 +417,42 @@ static int write_png(const Cohort *c, const char *path, char *err, int err_sz)
     ns_image_fill(&im, white);
     char ferr[256];
     NsFont *font = ns_font_open(16, 0, ferr, (int)sizeof ferr); /* no font: no labels */
-    /* left: score over session number, one colour per trainee */
-    ns_image_fill_rect(&im, PX, PY, 1, PH, grey, 1.0);
-    ns_image_fill_rect(&im, PX, PY + PH, PW, 1, grey, 1.0);
+    /* left: score (top) and largest target error (bottom) over session number, one colour
+     * per trainee */
     int kmax = 1;
+    double emax = 1e-9;
     for (int t = 0; t < c->nt; t++) {
         int k = 0;
         for (int i = 0; i < c->n; i++)
             k += c->rows[i].trainee == t;
         kmax = k > kmax ? k : kmax;
     }
-    for (int t = 0; t < c->nt; t++) {
-        double px = NAN, py = NAN;
-        int m = 0;
-        for (int i = 0; i < c->n; i++) {
-            const Row *r = &c->rows[i];
-            if (r->trainee != t)
-                continue;
-            double x = PX + 10 + (kmax > 1 ? (double)m / (kmax - 1) : 0.5) * (PW - 20);
-            double y = PY + (1 - fmin(fmax(r->score / 100.0, 0), 1)) * PH;
-            m++;
-            if (!isfinite(r->score))
-                continue;
-            if (isfinite(px))
-                line(&im, px, py, x, y, pal[t % 6]);
-            dot(&im, x, y, 3, pal[t % 6]);
-            px = x, py = y;
+    for (int i = 0; i < c->n; i++)
+        if (isfinite(c->rows[i].err_mm))
+            emax = fmax(emax, c->rows[i].err_mm);
+    const int GH = PH / 2 - 20; /* each graph's height */
+    for (int g = 0; g < 2; g++) {
+        int y0 = PY + g * (GH + 40);
+        ns_image_fill_rect(&im, PX, y0, 1, GH, grey, 1.0);
+        ns_image_fill_rect(&im, PX, y0 + GH, PW, 1, grey, 1.0);
+        for (int t = 0; t < c->nt; t++) {
+            double px = NAN, py = NAN;
+            int m = 0;
+            for (int i = 0; i < c->n; i++) {
+                const Row *r = &c->rows[i];
+                if (r->trainee != t)
+                    continue;
+                double v = g ? r->err_mm / emax : r->score / 100.0;
+                double x = PX + 10 + (kmax > 1 ? (double)m / (kmax - 1) : 0.5) * (PW - 20);
+                double y = y0 + (1 - fmin(fmax(v, 0), 1)) * GH;
+                m++;
+                if (!isfinite(v))
+                    continue;
+                if (isfinite(px))
+                    line(&im, px, py, x, y, pal[t % 6]);
+                dot(&im, x, y, 3, pal[t % 6]);
+                px = x, py = y;
+            }
         }
     }
     /* right: per scenario, the quartile box and each session's dot, score 0..100 across */
@@ -451,11 +461,13 @@ static int write_png(const Cohort *c, const char *path, char *err, int err_sz)
         double q[6], y = PY + 30 + s * 60.0;
         if (y > PY + PH)
             break;
-        scenario_stats(c, s, q);
+        if (scenario_stats(c, s, q) == 0)
+            continue; /* no session of it scored (error rows) */
         ns_image_fill_rect(&im, RX, (int)y, RW, 1, grey, 1.0);
-        if (isfinite(q[0]))
-            ns_image_fill_rect(&im, RX + (int)(q[1] / 100 * RW), (int)y - 10,
-                               (int)fmax((q[3] - q[1]) / 100 * RW, 2), 21, box, 1.0);
+        ns_image_fill_rect(&im, RX + (int)(q[1] / 100 * RW), (int)y - 10,
+                           (int)fmax((q[3] - q[1]) / 100 * RW, 2), 21, box, 1.0);
+        ns_image_fill_rect(&im, RX + (int)(q[2] / 100 * RW) - 1, (int)y - 12, 3, 25, pal[0],
+                           1.0); /* the median */
         for (int i = 0; i < c->n; i++)
             if (c->rows[i].scenario == s && isfinite(c->rows[i].score))
                 dot(&im, RX + c->rows[i].score / 100 * RW, y, 3, ink);
@@ -463,7 +475,10 @@ static int write_png(const Cohort *c, const char *path, char *err, int err_sz)
             ns_font_draw(font, &im, RX, (int)y - 14, c->scenarios[s], ink);
     }
     if (font) {
+        char lab[96];
         ns_font_draw(font, &im, PX, 28, "score over each trainee's sessions (0 to 100)", ink);
+        snprintf(lab, sizeof lab, "largest target error (0 to %.2f mm)", emax);
+        ns_font_draw(font, &im, PX, PY + GH + 32, lab, ink);
         ns_font_draw(font, &im, RX, 28, "score per scenario (0 to 100): quartiles, sessions", ink);
         for (int t = 0; t < c->nt && t < 12; t++)
             ns_font_draw(font, &im, PX + 10 + (t % 4) * 120, PY + PH + 24 + (t / 4) * 20,
