@@ -127,8 +127,11 @@ static int real_dir(const char *path, char *err, int err_sz)
     if (lstat(path, &st) != 0) {
         if (errno == ENOENT && mkdir(path, 0777) == 0)
             return 0;
-        ns_set_err(err, err_sz, "cannot create output folder '%s': %s", path, strerror(errno));
-        return -1;
+        /* made meanwhile by another process (Slurm tasks start together): looked at again */
+        if (errno != EEXIST || lstat(path, &st) != 0) {
+            ns_set_err(err, err_sz, "cannot create output folder '%s': %s", path, strerror(errno));
+            return -1;
+        }
     }
     if (!S_ISDIR(st.st_mode)) {
         ns_set_err(err, err_sz, "'%s' is not a folder (a link or a file): outputs stay in OUT",

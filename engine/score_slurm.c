@@ -146,8 +146,15 @@ int ns_score_slurm(const NsScoreOpts *o, const NsScoreSession *s, int n, char *c
     snprintf(dir, sizeof dir, "%s/slurm", o->out);
 
     int chunks = (n + o->chunk - 1) / o->chunk;
+    struct stat st;
     if (mkdir(dir, 0777) != 0 && errno != EEXIST)
         return ns_set_err(err, err_sz, "cannot create '%s': %s", dir, strerror(errno)), -1;
+    if (lstat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) /* not a link out of OUT */
+        return ns_set_err(err, err_sz,
+                          "'%s' is not a folder (a link or a file): outputs stay "
+                          "in OUT",
+                          dir),
+               -1;
     if (write_inputs(o, n, dir, chunks, err, err_sz))
         return -1;
     int rc = submit(o, dir, chunks);
