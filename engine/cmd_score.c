@@ -409,7 +409,7 @@ int ns_cmd_score(int argc, char **argv)
         ns_set_err(err, sizeof err, "out of memory");
         rc = -1;
     }
-    int cached = 0, errors = 0, failed = 0;
+    int cached = 0, errors = 0, failed = 0, dups = 0;
     for (int i = 0; rc == 0 && i < o.nlogs; i++) {
         s[i].log = o.logs[i];
         setup_session(&o, &s[i], sc, nsc);
@@ -418,13 +418,15 @@ int ns_cmd_score(int argc, char **argv)
         else if (s[i].done)
             failed++; /* its log or scenario could not be read: an error row, no replay */
         for (int k = 0; k < i && !s[i].done && s[i].dup_of < 0; k++)
-            if (!s[k].done && s[k].dup_of < 0 && s[k].key == s[i].key)
-                s[i].dup_of = k;
+            if (!s[k].done && s[k].dup_of < 0 && s[k].key == s[i].key) {
+                s[i].dup_of = k; /* the same inputs: replayed once */
+                dups++;
+            }
     }
     if (rc == 0 && !o.quiet)
         fprintf(stderr,
                 "needlesim score: %d logs, %d already scored, %d to replay (%d at a time)\n",
-                o.nlogs, cached, o.nlogs - cached - failed, o.jobs);
+                o.nlogs, cached, o.nlogs - cached - failed - dups, o.jobs);
     char **rows = NULL;
     if (rc == 0 && o.slurm) {
         rows = calloc((size_t)o.nlogs, sizeof *rows);
