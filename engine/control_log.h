@@ -24,7 +24,8 @@
  *                                       steps with them (%.17g, so bit for bit)
  *
  * Other '#' lines are comments, skipped (later versions add keys). A replay refuses a log whose
- * scenario hash is not its scenario file's, unless told to re-score it; a log without a hash
+ * scenario hash is not its scenario file's, or whose version is not this program's, unless told
+ * to re-score it (--rescore); a log without a hash
  * (older logs, hand-written ones) is replayed with a warning. The values of a row are bounded
  * by ns_limits.h (NS_LIMIT_INSERT_SPEED, ..._BASE_SPEED, ..._TWIST_RATE), the rows by
  * NS_LIMIT_STEPS and the file by NS_LIMIT_LOG_FILE_BYTES (a regular file only). */
