@@ -49,7 +49,7 @@
 static const char run_usage[] =
     "usage: needlesim run SCENARIO.lua [-o DIR] [--steps N] [--threads N] [--solver NAME]\n"
     "                     [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv]\n"
-    "                     [--trainee ID] [--session ID] [--rescore]\n"
+    "                     [--trainee ID] [--session ID] [--rescore] [--score-row]\n"
     "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
     "                     [--height H] [--frame-every K] [--quiet]\n"
     "                     [--checkpoint-at T FILE] [--resume FILE]\n";
@@ -188,6 +188,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             o->quiet = true;
         } else if (strcmp(a, "--rescore") == 0) {
             o->rescore = true;
+        } else if (strcmp(a, "--score-row") == 0) {
+            o->score_row = true;
         } else if (a[0] == '-' && a[1] != '\0') {
             return usage_error("unknown option '%s'", a);
         } else if (!o->scenario) {
@@ -238,8 +240,8 @@ int ns_run_open_logs(NsRun *r, char *err, int err_sz)
     }
     if (rc == 0 && r->opt.replay)
         rc = ns_control_log_check_scenario(&r->replay, r->opt.replay, r->sc.name, sc_hash,
-                                           r->opt.rescore, r->note, (int)sizeof r->note, err,
-                                           err_sz);
+                                           NS_VERSION, r->opt.rescore, r->note, (int)sizeof r->note,
+                                           err, err_sz);
     if (rc == 0 && r->opt.replay) { /* the same --set values as the recording */
         bool same = r->replay.nsets == r->opt.nsets;
         for (int i = 0; same && i < r->opt.nsets; i++) {

@@ -11,6 +11,7 @@ int ns_cmd_run(int argc, char **argv);
 int ns_cmd_bench(int argc, char **argv);
 int ns_cmd_live(int argc, char **argv);
 int ns_cmd_plan(int argc, char **argv);
+int ns_cmd_score(int argc, char **argv);
 /* engine/bench_live.c: `needlesim bench --live` (ns_cmd_bench passes it on) */
 int ns_bench_live(int argc, char **argv);
 /* engine/bench_dose.c: `needlesim bench --dose` (ns_cmd_bench passes it on) */

@@ -109,10 +109,10 @@ static const char *show_name(const char *s, char out[88])
 }
 
 int ns_control_log_check_scenario(const NsControlLog *log, const char *path, const char *name,
-                                  uint64_t hash, bool rescore, char *note, int note_sz, char *err,
-                                  int err_sz)
+                                  uint64_t hash, const char *version, bool rescore, char *note,
+                                  int note_sz, char *err, int err_sz)
 {
-    char a[88], b[88];
+    char a[88], b[88], va[88], vb[88];
     if (note_sz > 0)
         note[0] = '\0';
     if (!log->has_hash) {
@@ -122,21 +122,34 @@ int ns_control_log_check_scenario(const NsControlLog *log, const char *path, con
                  path, show_name(name, a));
         return 0;
     }
-    if (log->scenario_hash == hash)
-        return 0;
     const char *recorded = log->scenario[0] ? log->scenario : "?";
+    bool other_version = log->version[0] && strcmp(log->version, version) != 0;
+    if (log->scenario_hash == hash && !other_version)
+        return 0;
     if (rescore) {
         snprintf(note, (size_t)note_sz,
-                 "needlesim: %s: recorded against scenario '%s' (hash %016" PRIx64
-                 "), re-scored against '%s' (hash %016" PRIx64 ") as --rescore asks",
-                 path, show_name(recorded, a), log->scenario_hash, show_name(name, b), hash);
+                 "needlesim: %s: recorded %s%s%sagainst scenario '%s' (hash %016" PRIx64
+                 "), re-scored against '%s' (hash %016" PRIx64 ") by needlesim %s as --rescore "
+                 "asks",
+                 path, other_version ? "by needlesim " : "",
+                 other_version ? show_name(log->version, va) : "", other_version ? " " : "",
+                 show_name(recorded, a), log->scenario_hash, show_name(name, b), hash,
+                 show_name(version, vb));
         return 0;
     }
-    ns_set_err(err, err_sz,
-               "%s:%ld: recorded against scenario '%s' (hash %016" PRIx64 "), not '%s' (hash "
-               "%016" PRIx64 "); --rescore replays it anyway",
-               path, log->hash_line, show_name(recorded, a), log->scenario_hash, show_name(name, b),
-               hash);
+    if (log->scenario_hash != hash)
+        ns_set_err(err, err_sz,
+                   "%s:%ld: recorded against scenario '%s' (hash %016" PRIx64 "), not '%s' (hash "
+                   "%016" PRIx64 "); --rescore replays it anyway",
+                   path, log->hash_line, show_name(recorded, a), log->scenario_hash,
+                   show_name(name, b), hash);
+    else
+        ns_set_err(err, err_sz,
+                   "%s:%ld: recorded by needlesim %s against scenario '%s' (hash %016" PRIx64
+                   "), this is needlesim %s with '%s' (hash %016" PRIx64 "); --rescore replays "
+                   "it anyway",
+                   path, log->version_line, show_name(log->version, va), show_name(recorded, a),
+                   log->scenario_hash, show_name(version, vb), show_name(name, b), hash);
     return -1;
 }
 
@@ -264,6 +277,7 @@ static int read_comment(const char *p, const char *path, long lineno, NsControlL
         return read_model(p + 7, path, lineno, log, err, err_sz);
     } else if (strncmp(p, "#needlesim ", 11) == 0) {
         snprintf(log->version, sizeof log->version, "%s", p + 11);
+        log->version_line = lineno;
     } else if (strncmp(p, "#trainee ", 9) == 0 || strncmp(p, "#session ", 9) == 0) {
         v = p + 9;
         if (!ns_control_log_id_ok(v)) {
@@ -375,56 +389,83 @@ static int parse_row(char *line, const char *path, long lineno, long step, doubl
     return 0;
 }
 
-int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz)
+/* The '#' lines before the header (what the log was recorded with: control_log.h), then the
+ * header line itself, from f into log; line (1024 bytes) is the reader's buffer, lineno and
+ * bytes count what was read. 0, or -1 with "path:line: ..." in err. */
+static int read_head(FILE *f, const char *path, NsControlLog *log, char *line, long *lineno,
+                     long long *bytes, char *err, int err_sz)
 {
-    memset(log, 0, sizeof *log);
-    /* A regular file within the size limit, checked before it is opened for reading (a FIFO
-     * or /dev/zero would block or never end); the rows are bounded below. */
-    int fd = ns_file_open_regular(path, NS_LIMIT_LOG_FILE_BYTES, "control log", NULL, err, err_sz);
-    FILE *f = fd >= 0 ? fdopen(fd, "r") : NULL;
-    if (!f) {
-        if (fd >= 0) {
-            ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
-            close(fd);
-        }
-        return -1;
-    }
-    char line[1024];
-    long lineno = 0, cap = 0, blank = 0;
-    long long bytes = 0;
-    int rc = 0;
-    /* '#' lines before the header: what the log was recorded with (control_log.h). */
-    int got = 0;
-    while (rc == 0 && (got = fgets(line, sizeof line, f) != NULL)) {
-        lineno++;
-        bytes += (long long)strlen(line);
+    int rc = 0, got = 0;
+    while (rc == 0 && (got = fgets(line, 1024, f) != NULL)) {
+        (*lineno)++;
+        *bytes += (long long)strlen(line);
         char *p = line;
-        if (lineno == 1 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB &&
+        if (*lineno == 1 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB &&
             (unsigned char)p[2] == 0xBF)
             p += 3; /* a UTF-8 byte-order mark */
         if (!strchr(p, '\n') && !feof(f)) {
-            ns_set_err(err, err_sz, "%s:%ld: line too long", path, lineno);
-            rc = -1;
-            break;
+            ns_set_err(err, err_sz, "%s:%ld: line too long", path, *lineno);
+            return -1;
         }
         chomp(p);
         if (p[0] != '#') {
             memmove(line, p, strlen(p) + 1);
             break;
         }
-        rc = read_comment(p, path, lineno, log, err, err_sz);
+        rc = read_comment(p, path, *lineno, log, err, err_sz);
     }
-    if (rc) {
-        /* the message is set */
-    } else if (!got) {
-        ns_set_err(err, err_sz, "%s:%ld: no header (want %s)", path, lineno + 1,
+    if (rc)
+        return -1;
+    if (!got) {
+        ns_set_err(err, err_sz, "%s:%ld: no header (want %s)", path, *lineno + 1,
                    NS_CONTROL_LOG_HEADER);
-        rc = -1;
-    } else if (strcmp(line, NS_CONTROL_LOG_HEADER) != 0) {
-        ns_set_err(err, err_sz, "%s:%ld: the header must be %s", path, lineno,
-                   NS_CONTROL_LOG_HEADER);
-        rc = -1;
+        return -1;
     }
+    if (strcmp(line, NS_CONTROL_LOG_HEADER) != 0) {
+        ns_set_err(err, err_sz, "%s:%ld: the header must be %s", path, *lineno,
+                   NS_CONTROL_LOG_HEADER);
+        return -1;
+    }
+    return 0;
+}
+
+/* Opens a log for reading: a regular file within the size limit, checked before it is opened
+ * (a FIFO or /dev/zero would block or never end). NULL with a message in err. */
+static FILE *open_log(const char *path, char *err, int err_sz)
+{
+    int fd = ns_file_open_regular(path, NS_LIMIT_LOG_FILE_BYTES, "control log", NULL, err, err_sz);
+    FILE *f = fd >= 0 ? fdopen(fd, "r") : NULL;
+    if (!f && fd >= 0) {
+        ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
+        close(fd);
+    }
+    return f;
+}
+
+int ns_control_log_read_provenance(const char *path, NsControlLog *log, char *err, int err_sz)
+{
+    memset(log, 0, sizeof *log);
+    FILE *f = open_log(path, err, err_sz);
+    if (!f)
+        return -1;
+    char line[1024];
+    long lineno = 0;
+    long long bytes = 0;
+    int rc = read_head(f, path, log, line, &lineno, &bytes, err, err_sz);
+    fclose(f);
+    return rc;
+}
+
+int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz)
+{
+    memset(log, 0, sizeof *log);
+    FILE *f = open_log(path, err, err_sz); /* the rows are bounded below */
+    if (!f)
+        return -1;
+    char line[1024];
+    long lineno = 0, cap = 0, blank = 0;
+    long long bytes = 0;
+    int rc = read_head(f, path, log, line, &lineno, &bytes, err, err_sz);
     long header_line = lineno;
     while (rc == 0 && fgets(line, sizeof line, f)) {
         lineno++;

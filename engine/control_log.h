@@ -24,7 +24,8 @@
  *                                       steps with them (%.17g, so bit for bit)
  *
  * Other '#' lines are comments, skipped (later versions add keys). A replay refuses a log whose
- * scenario hash is not its scenario file's, unless told to re-score it; a log without a hash
+ * scenario hash is not its scenario file's, or whose version is not this program's, unless told
+ * to re-score it (--rescore); a log without a hash
  * (older logs, hand-written ones) is replayed with a warning. The values of a row are bounded
  * by ns_limits.h (NS_LIMIT_INSERT_SPEED, ..._BASE_SPEED, ..._TWIST_RATE), the rows by
  * NS_LIMIT_STEPS and the file by NS_LIMIT_LOG_FILE_BYTES (a regular file only). */
@@ -74,7 +75,8 @@ typedef struct NsControlLog {
     char scenario[256]; /* #scenario */
     uint64_t scenario_hash;
     bool has_hash;
-    long hash_line; /* the #scenario_hash line, for messages */
+    long hash_line;    /* the #scenario_hash line, for messages */
+    long version_line; /* the #needlesim line, for messages */
     char trainee[NS_CONTROL_LOG_ID_MAX + 1], session[NS_CONTROL_LOG_ID_MAX + 1];
     bool live; /* #source live */
     bool has_model;
@@ -98,15 +100,24 @@ typedef struct NsLogProvenance {
 int ns_control_log_read(const char *path, double dt, NsControlLog *log, char *err, int err_sz);
 void ns_control_log_free(NsControlLog *log);
 
-/* Whether the log may drive a replay of the scenario `name` whose file hashes to `hash`: 0 when
- * its #scenario_hash is that hash; when it is another, -1 with "path:line: recorded against
- * scenario 'X' (hash ...), not 'Y' (hash ...); --rescore replays it anyway" in err, or, with
- * rescore, 0 and a note in `note`; without a #scenario_hash line, 0 and a warning in `note`
- * (the caller says it once the run has succeeded, so a failed run's message stays one line).
- * note is "" when there is nothing to say. */
+/* Whether the log may drive a replay of the scenario `name` whose file hashes to `hash` by this
+ * program, whose version is `version`: 0 when its #scenario_hash is that hash and its
+ * #needlesim that version; when the hash is another, -1 with "path:line: recorded against
+ * scenario 'X' (hash ...), not 'Y' (hash ...); --rescore replays it anyway" in err; when the
+ * version is another, -1 with "path:line: recorded by needlesim V1 against scenario 'X' (hash
+ * ...), this is needlesim V2 with 'Y' (hash ...); --rescore replays it anyway"; with rescore, 0
+ * and a note in `note` instead. Without a #scenario_hash line, 0 and a warning in `note` (the
+ * caller says it once the run has succeeded, so a failed run's message stays one line); a log
+ * without a #needlesim line is not checked for its version. note is "" when there is nothing
+ * to say. */
 int ns_control_log_check_scenario(const NsControlLog *log, const char *path, const char *name,
-                                  uint64_t hash, bool rescore, char *note, int note_sz, char *err,
-                                  int err_sz);
+                                  uint64_t hash, const char *version, bool rescore, char *note,
+                                  int note_sz, char *err, int err_sz);
+
+/* Reads only the '#' lines of a log, up to its header line (what `needlesim score` needs to
+ * find the log's scenario): the provenance fields of `log` (no rows). Returns 0, or -1 with
+ * "path:line: ..." in err. The same checks as ns_control_log_read for those lines. */
+int ns_control_log_read_provenance(const char *path, NsControlLog *log, char *err, int err_sz);
 
 /* 64-bit FNV-1a (the state hashes' function: sim/tissue.c) of a file's bytes: a regular file
  * of at most max_bytes (`what` names it in messages). Returns 0, or -1 with "path: message" in

@@ -34,6 +34,10 @@ static const char usage[] =
     "                 [--method rrt|helix] [--seed N]\n"
     "      plan a bevel-tip insertion to a target around the obstacles on the kinematic model\n"
     "      (docs/planning.md): predicted error, clearance, length and planning time\n"
+    "  needlesim score LOG.csv... -o OUT [--jobs N] [--scenario-dir DIR] [--rescore]\n"
+    "                  [--slurm [--partition P] [--array-chunk K]]\n"
+    "      replay and score a training programme's logs into OUT/scores.csv and the cohort\n"
+    "      report (docs/scoring.md); a stopped batch resumes\n"
     "  needlesim validate [CASE...] [--json] [--list]\n"
     "      run the built-in validation cases (docs/validation.md); exit 1 if any fails\n"
     "  needlesim bench SCENARIO.lua [--steps N] [--solver NAME] [--threads N] [--set KEY=VALUE]\n"
@@ -92,6 +96,8 @@ int main(int argc, char **argv)
         return ns_cmd_live(argc - 1, argv + 1);
     if (strcmp(cmd, "plan") == 0)
         return ns_cmd_plan(argc - 1, argv + 1);
+    if (strcmp(cmd, "score") == 0)
+        return ns_cmd_score(argc - 1, argv + 1);
     if (cmd[0] == '-')
         fprintf(stderr, "needlesim: unknown option '%s' (needlesim --help)\n", cmd);
     else

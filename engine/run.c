@@ -718,6 +718,7 @@ void ns_run_free(NsRun *r)
     free(r->events);
     free(r->traj_tmp);
     free(r->report_tmp);
+    free(r->row_tmp);
     free(r->rec_tmp);
     ns_control_log_free(&r->replay);
     free(r->views);

@@ -26,6 +26,7 @@ typedef struct NsRunOpts {
      * another scenario file */
     const char *trainee, *session;
     bool rescore;
+    bool score_row;       /* --score-row: DIR/score_row.csv for `needlesim score` (score_csv.h) */
     bool live;            /* a live session (docs/live.md): controls come given to ns_run_tick */
     const char *sets[32]; /* --set KEY=VALUE */
     int nsets;
@@ -124,7 +125,7 @@ typedef struct NsRun {
     int tip_hint, insertions;
     double prev_v;
     /* output */
-    char *traj_tmp, *report_tmp, *rec_tmp;
+    char *traj_tmp, *report_tmp, *rec_tmp, *row_tmp;
     FILE *rec;
     NsControlLog replay;
     bool made_dir, progress_shown, script_finished;

@@ -158,6 +158,8 @@ void ns_run_outputs_remove(NsRun *r)
         ns_out_remove_part(r->traj_tmp);
     if (r->report_tmp)
         ns_out_remove_part(r->report_tmp);
+    if (r->row_tmp)
+        ns_out_remove_part(r->row_tmp);
     if (r->rendering) { /* also closes ffmpeg */
         ns_run_render_abort(&r->rr);
         r->rendering = false;
@@ -188,6 +190,16 @@ int ns_run_outputs_commit(NsRun *r, char *err, int err_sz)
                 remove(traj);
             rc = -1;
         }
+        /* --score-row: after the report, which it summarizes */
+        char *row = r->row_tmp ? ns_run_path_join(r->opt.out_dir, "score_row.csv") : NULL;
+        if (rc == 0 && r->row_tmp && (!row || ns_out_commit(r->row_tmp, row))) {
+            ns_set_err(err, err_sz, "cannot write to output folder '%s': %s", r->opt.out_dir,
+                       strerror(errno));
+            remove(traj);
+            remove(rep);
+            rc = -1;
+        }
+        free(row);
         /* The pictures before the log: they are part of the run's outputs. */
         if (rc == 0 && r->rendering && ns_run_render_commit(&r->rr, err, err_sz)) {
             remove(traj);

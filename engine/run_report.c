@@ -23,6 +23,7 @@
 #include "remesh.h"
 #include "rod.h"
 #include "run.h"
+#include "score_csv.h"
 
 void ns_run_stats_object(NsJson *j, const char *key, const NsSeries *s)
 {
@@ -373,8 +374,72 @@ static void report_render(NsJson *j, NsRun *r)
     ns_json_end_object(j);
 }
 
+/* Appends name to list (size n), ';' and '=' in it as '_' unless it is the separator itself. */
+static void append_item(char *list, size_t n, const char *name)
+{
+    size_t at = strlen(list);
+    bool sep = strcmp(name, ";") == 0;
+    for (; *name && at + 1 < n; name++)
+        list[at++] = !sep && (*name == ';' || *name == '=') ? '_' : *name;
+    list[at] = '\0';
+}
+
+/* --score-row: DIR/score_row.csv, the replay's part of its row in scores.csv (score_csv.h). */
+static int write_score_row(NsRun *r, const NsRunResults *res, uint64_t hash, char *err, int err_sz)
+{
+    r->row_tmp = ns_run_path_join(r->opt.out_dir, ".score_row.csv.part");
+    FILE *f = r->row_tmp ? ns_out_create_part(r->row_tmp, "the score row", err, err_sz) : NULL;
+    if (!f) {
+        if (!r->row_tmp)
+            ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    fputs(NS_SCORE_RUN_HEADER "\n", f);
+    ns_csv_field(f, r->sc.name);
+    int hit = 0;
+    double worst = 0.0;
+    for (int i = 0; i < r->spec.target_count; i++) {
+        hit += res->targets[i].hit;
+        worst = fmax(worst, res->targets[i].error_mm);
+    }
+    fprintf(f, ",%.4f,%d,%d,", res->total, r->spec.target_count, hit);
+    if (r->spec.target_count)
+        fprintf(f, "%.4f", worst);
+    /* target_errors_mm: "name=error;..."; obstacles_entered: "name;..." (names' ';' and '=' as
+     * '_') */
+    char list[2048] = "", obst[2048] = "";
+    for (int i = 0; i < r->spec.target_count; i++) {
+        if (i)
+            append_item(list, sizeof list, ";");
+        append_item(list, sizeof list, r->spec.targets[i].name);
+        char e[40];
+        snprintf(e, sizeof e, "=%.4f", res->targets[i].error_mm);
+        size_t n = strlen(list);
+        snprintf(list + n, sizeof list - n, "%s", e);
+    }
+    for (int k = 0; k < r->spec.obstacle_count; k++)
+        if (r->obst[k].violated) {
+            if (obst[0])
+                append_item(obst, sizeof obst, ";");
+            append_item(obst, sizeof obst, r->spec.obstacles[k].name);
+        }
+    fputc(',', f);
+    ns_csv_field(f, list);
+    fprintf(f, ",%d,", res->violated);
+    ns_csv_field(f, obst);
+    fprintf(f, ",%.6g,%ld,%d,%d,%d,%d,%016llx\n", (double)r->steps * r->spec.dt, r->steps, r->nan,
+            r->inverted, r->unconverged, r->lcp_unresolved, (unsigned long long)hash);
+    if (fclose(f) != 0) {
+        ns_set_err(err, err_sz, "cannot write '%s': %s", r->row_tmp, strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
 int ns_run_write_report(NsRun *r, const NsRunResults *res, uint64_t hash, char *err, int err_sz)
 {
+    if (r->opt.score_row && write_score_row(r, res, hash, err, err_sz))
+        return -1;
     FILE *f = ns_out_create_part(r->report_tmp, "the report", err, err_sz);
     if (!f)
         return -1;

@@ -207,6 +207,25 @@ fi
 same_run "--record then --replay --rescore (scenario without its script): same state hash and score" \
     "$TMP/t1/report.json" "$TMP/t3/report.json"
 if grep -q "re-scored against 'tutorial'" "$TMP/err3"; then pass "--rescore says so on stderr"; else fail "--rescore note" "$(head -1 "$TMP/err3")"; fi
+# A log recorded by another version (#needlesim) is refused too, naming both versions and
+# hashes; --rescore replays it anyway (issue 37).
+sed 's/^#needlesim .*/#needlesim 0.0.9/' "$TMP/t1.csv" >"$TMP/t1_v.csv"
+"$BIN" run "$TUT" -o "$TMP/t6" --replay "$TMP/t1_v.csv" --quiet >/dev/null 2>"$TMP/err6"
+rc=$?
+if [ $rc = 1 ] && grep -Eq "t1_v.csv:1: recorded by needlesim 0.0.9 against scenario 'tutorial' \(hash [0-9a-f]{16}\), this is needlesim [0-9.]+ with 'tutorial' \(hash [0-9a-f]{16}\); --rescore replays it anyway" "$TMP/err6" &&
+    [ ! -e "$TMP/t6/report.json" ]; then
+    pass "a log recorded by another version: exit 1, both versions and hashes named"
+else
+    fail "log from another version" "exit $rc: $(head -1 "$TMP/err6")"
+fi
+"$BIN" run "$TUT" -o "$TMP/t6" --replay "$TMP/t1_v.csv" --rescore --quiet >/dev/null 2>"$TMP/err6"
+same_run "a log from another version replayed with --rescore: same state hash and score" \
+    "$TMP/t1/report.json" "$TMP/t6/report.json"
+if grep -q "recorded by needlesim 0.0.9 against scenario 'tutorial'.*re-scored against 'tutorial'" "$TMP/err6"; then
+    pass "--rescore of another version's log says so on stderr"
+else
+    fail "--rescore version note" "$(head -1 "$TMP/err6")"
+fi
 # The log's provenance lines; a log without them (older, hand-written) replays with a warning.
 h=$(python3 -c 'import sys
 h = 0xcbf29ce484222325
