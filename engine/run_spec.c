@@ -465,7 +465,8 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
                                                               : -1;
         free(steer);
         spec->arc_curvature = num_field(L, ni, "curvature", 10.0);
-        spec->bevel_force = num_field(L, ni, "bevel_force", ns_default_coupling_params().bevel_force[0]);
+        spec->bevel_force =
+            num_field(L, ni, "bevel_force", ns_default_coupling_params().bevel_force[0]);
         spec->twist_friction = bool_field(L, ni, "twist_friction", true);
     } else {
         spec->needle_kind = malloc(6);
