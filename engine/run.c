@@ -260,7 +260,7 @@ int ns_run_build(NsRun *r, char *err, int err_sz)
     }
     for (int i = 0; i < sp->target_count; i++)
         r->target_hint[i] = -1;
-    return 0;
+    return ns_run_dosimetry_begin(r, err, err_sz);
 }
 
 /* act.next_needle: the needle, out of the tissue, is replaced by a new one at another entry
@@ -665,6 +665,8 @@ int ns_run_end(NsRun *r, NsRunResults *res, uint64_t *hash, char *err, int err_s
         ns_set_err(err, err_sz, "out of memory");
         rc = -1;
     }
+    if (rc == 0)
+        rc = ns_run_dosimetry_end(r, err, err_sz);
     if (rc == 0 && r->rendering) {
         double t0 = ns_wall_s();
         rc = ns_run_render_end(r, res, err, err_sz);
@@ -691,6 +693,7 @@ void ns_run_free(NsRun *r)
         luaL_unref(L, LUA_REGISTRYINDEX, r->co_ref);
     if (r->have_steer)
         ns_run_steer_free(&r->steer);
+    ns_run_dosimetry_free(r);
     if (r->have_c)
         ns_coupled_free(&r->c);
     if (r->have_rod)

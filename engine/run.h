@@ -172,6 +172,7 @@ typedef struct NsRun {
     void *report_ctx;
     NsRunSteer steer;
     bool have_steer;
+    struct NsRunDose *dose; /* dosimetry = {...} (engine/run_dosimetry.c), or NULL */
 } NsRun;
 
 enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT, EVENT_REENTRY };
@@ -289,5 +290,15 @@ int ns_run_end(NsRun *r, NsRunResults *res, uint64_t *hash, char *err, int err_s
 /* The trajectory closed, and every output renamed into place: the report and trajectory, the
  * pictures, the control log last (a log on disk means the run and its report are there). */
 int ns_run_outputs_commit(NsRun *r, char *err, int err_sz);
+/* engine/run_dosimetry.c: dosimetry = {...}: the regions' voxels and the planned dose when the
+ * run is built (begin), the delivered dose at its end, report.json's `dosimetry`, DIR/dvh.csv
+ * (written as a part file, committed with the other outputs; uncommit removes it again). */
+int ns_run_dosimetry_begin(NsRun *r, char *err, int err_sz);
+int ns_run_dosimetry_end(NsRun *r, char *err, int err_sz);
+void ns_run_dosimetry_json(NsJson *j, const NsRun *r);
+int ns_run_dosimetry_write(NsRun *r, char *err, int err_sz);
+int ns_run_dosimetry_commit(NsRun *r);
+void ns_run_dosimetry_uncommit(NsRun *r);
+void ns_run_dosimetry_free(NsRun *r);
 
 #endif

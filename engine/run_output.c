@@ -116,6 +116,7 @@ int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz)
          (r->opt.record && ns_out_replaceable(r->opt.record, "the control log", err, err_sz)) ||
          (r->opt.video && ns_out_replaceable(r->opt.video, "the video", err, err_sz))))
         rc = -1;
+
     /* An earlier run's outputs stay until this run succeeds: the renames at the end replace
      * them, and a failed run leaves them as they were. */
     free(old_t);
@@ -206,6 +207,13 @@ int ns_run_outputs_commit(NsRun *r, char *err, int err_sz)
             remove(rep);
             rc = -1;
         }
+        if (rc == 0 && ns_run_dosimetry_commit(r)) {
+            ns_set_err(err, err_sz, "cannot write to output folder '%s': %s", r->opt.out_dir,
+                       strerror(errno));
+            remove(traj);
+            remove(rep);
+            rc = -1;
+        }
         /* The control log last: a log on disk means the run and its report are there. */
         if (rc == 0 && r->rec) {
             int bad = ferror(r->rec) != 0;
@@ -216,6 +224,7 @@ int ns_run_outputs_commit(NsRun *r, char *err, int err_sz)
                            strerror(errno));
                 remove(traj);
                 remove(rep);
+                ns_run_dosimetry_uncommit(r);
                 rc = -1;
             }
         }

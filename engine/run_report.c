@@ -455,6 +455,7 @@ int ns_run_write_report(NsRun *r, const NsRunResults *res, uint64_t hash, char *
     snprintf(h, sizeof h, "%016llx", (unsigned long long)hash);
     report_render(&j, r);
     ns_run_steer_report(&j, r, res);
+    ns_run_dosimetry_json(&j, r);
     if (r->report_extra)
         r->report_extra(&j, r->report_ctx);
     ns_json_key(&j, "state_hash");
@@ -465,5 +466,5 @@ int ns_run_write_report(NsRun *r, const NsRunResults *res, uint64_t hash, char *
         ns_set_err(err, err_sz, "cannot write '%s': %s", r->report_tmp, strerror(errno));
         return -1;
     }
-    return 0;
+    return ns_run_dosimetry_write(r, err, err_sz);
 }

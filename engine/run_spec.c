@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "coupling.h"
+#include "dose.h"
 #include "err.h"
 #include "mesh.h"
 #include "names.h"
@@ -231,6 +232,7 @@ void ns_run_spec_free(NsRunSpec *spec)
     free(spec->obstacles);
     free(spec->seed_target);
     free(spec->live_entries);
+    free(spec->dosimetry.plan);
     memset(spec, 0, sizeof *spec);
 }
 
@@ -435,6 +437,91 @@ static int names_check_run(const NsScenario *sc, const NsRunSpec *spec, char *er
     return 0;
 }
 
+/* dosimetry = {...}: the Lua side (dosimetry_of) checked each field; this checks them again,
+ * resolves the region names and reads the plan (else the seed plan's targets), each planned
+ * seed inside the tissue. */
+static int read_dosimetry(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int si, char *err,
+                          int err_sz)
+{
+    NsRunDosimetry *d = &spec->dosimetry;
+    if (raw_field(L, si, "dosimetry") != LUA_TTABLE)
+        return 0;
+    int di = lua_gettop(L);
+    d->on = true;
+    d->prescription = num_field(L, di, "prescription", NAN);
+    d->strength = num_field(L, di, "strength", NAN) * NS_TG43_UNIT_U;
+    d->spacing = num_field(L, di, "spacing", NAN);
+    if (!(d->prescription > 0.0 && d->prescription <= NS_LIMIT_DOSE_PRESCRIPTION) ||
+        !(d->strength > 0.0 && d->strength <= NS_LIMIT_DOSE_STRENGTH * NS_TG43_UNIT_U) ||
+        !(d->spacing >= NS_LIMIT_DOSE_SPACING_MIN && d->spacing <= NS_LIMIT_DOSE_SPACING_MAX)) {
+        ns_set_err(err, err_sz,
+                   "%s: ns.scenario: dosimetry: prescription, strength or spacing out of range",
+                   sc->where);
+        return -1;
+    }
+    static const char *const keys[3] = {"prostate", "urethra", "rectum"};
+    for (int k = 0; k < 3; k++) {
+        char *name = str_field(L, di, keys[k], "?");
+        d->region[k] = -1;
+        for (int i = 0; name && i < sc->region_count; i++)
+            if (strcmp(sc->regions[i].name, name) == 0)
+                d->region[k] = i;
+        if (d->region[k] < 0) {
+            ns_set_err(err, err_sz,
+                       "%s: ns.scenario: dosimetry.%s: '%s' is not a region of the tissue",
+                       sc->where, keys[k], name ? name : "?");
+            free(name);
+            return -1;
+        }
+        free(name);
+    }
+    int n = 0;
+    if (raw_field(L, di, "plan") == LUA_TTABLE)
+        n = (int)lua_rawlen(L, -1);
+    if (n > NS_LIMIT_DOSE_PLAN_SEEDS) {
+        ns_set_err(err, err_sz, "%s: ns.scenario: dosimetry.plan: more than %d seeds", sc->where,
+                   NS_LIMIT_DOSE_PLAN_SEEDS);
+        return -1;
+    }
+    int from_targets = n == 0;
+    if (from_targets)
+        n = spec->seed_count;
+    if (n < 1) {
+        ns_set_err(err, err_sz, "%s: ns.scenario: dosimetry: no planned seed (give plan or seeds)",
+                   sc->where);
+        return -1;
+    }
+    d->plan = malloc((size_t)n * 3 * sizeof *d->plan);
+    if (!d->plan) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    d->plan_n = n;
+    for (int i = 0; i < n; i++) {
+        double *p = d->plan + 3 * i;
+        if (from_targets) {
+            memcpy(p, spec->targets[spec->seed_target[i]].at, 3 * sizeof *p);
+        } else {
+            lua_rawgeti(L, -1, i + 1);
+            p[0] = p[1] = p[2] = NAN;
+            for (int c = 0; lua_istable(L, -1) && c < 3; c++) {
+                if (lua_rawgeti(L, -1, c + 1) == LUA_TNUMBER)
+                    p[c] = lua_tonumber(L, -1);
+                lua_pop(L, 1);
+            }
+            lua_pop(L, 1);
+        }
+        if (!finite3(p) || ns_mesh_locate(&sc->mesh, p, -1, 1e-9, NULL) < 0) {
+            ns_set_err(err, err_sz,
+                       "%s: ns.scenario: dosimetry.plan[%d] at (%g, %g, %g) m is not a point "
+                       "inside the tissue",
+                       sc->where, i + 1, p[0], p[1], p[2]);
+            return -1;
+        }
+    }
+    return 0;
+}
+
 int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_sz)
 {
     memset(spec, 0, sizeof *spec);
@@ -568,6 +655,9 @@ int ns_run_spec_read(const NsScenario *sc, NsRunSpec *spec, char *err, int err_s
     lua_settop(L, si);
     if (rc == 0)
         rc = read_lists(sc, spec, L, si, err, err_sz);
+    lua_settop(L, si);
+    if (rc == 0)
+        rc = read_dosimetry(sc, spec, L, si, err, err_sz);
     rc = rc ? rc : names_check_run(sc, spec, err, err_sz); /* names.h: CSV- and JSON-safe */
     lua_settop(L, top);
     if (rc == 0)

@@ -39,6 +39,17 @@ typedef struct NsRunCamera {
     bool tet_edges, friction_colours;
 } NsRunCamera;
 
+/* dosimetry = {...} (docs/brachytherapy.md): the seeds' TG-43 dose, planned against delivered. */
+typedef struct NsRunDosimetry {
+    bool on;
+    double prescription; /* [Gy] */
+    double strength;     /* each seed's air-kerma strength S_K [Gy m^2 s^-1] */
+    double spacing;      /* the dose grid's [m] */
+    int region[3];       /* prostate, urethra, rectum: indices into the scenario's regions */
+    double *plan;        /* the planned seed centres in the undeformed anatomy (plan_n x 3) [m] */
+    int plan_n;
+} NsRunDosimetry;
+
 typedef struct NsRunSpec {
     /* ns.needle{} (the stiff default when the scenario has none) */
     char *needle_kind;
@@ -80,6 +91,7 @@ typedef struct NsRunSpec {
     bool live_script;
     NsEntry *live_entries;
     int live_entry_count;
+    NsRunDosimetry dosimetry;
 } NsRunSpec;
 
 /* Reads sc's run fields. Returns 0, or -1 with one line naming the scenario's file and line

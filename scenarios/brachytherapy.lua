@@ -94,6 +94,10 @@ return ns.scenario {
   entry = { point = { holes[1][1], holes[1][2], 0 }, direction = { 0, 0, 1 } },
   targets = targets,
   seeds = seeds,
+  -- The seeds' TG-43 dose, planned (at the targets) against delivered (where the tissue left
+  -- them): report.json's `dosimetry`, DIR/dvh.csv (docs/brachytherapy.md). Four seeds cover
+  -- only a corner of the gland; scenarios/brachytherapy_implant.lua is the full implant.
+  dosimetry = { prescription = 145, strength = 0.5 },
   obstacles = {
     { name = "urethra", region = "urethra" },
     { name = "rectum", region = "rectum" },

@@ -941,7 +941,7 @@ end
 
 local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "duration", "needle",
     "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
-    "accuracy", "solver", "live" }
+    "accuracy", "solver", "live", "dosimetry" }
 -- Accepted now and checked by the stages that use them (later versions).
 local RESERVED = {}
 
@@ -956,6 +956,10 @@ local VIEWS = { side = true, top = true, axis = true }
 local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold", "tip_block" }
 local ACCURACY_FIELDS = { "tip", "front" }
 local LIVE_FIELDS = { "script", "entries" }
+local DOSIMETRY_FIELDS = { "prescription", "strength", "source", "spacing", "prostate", "urethra",
+    "rectum", "plan" }
+-- sim/ns_limits.h's NS_LIMIT_DOSE_* (the engine checks them again)
+local DOSE_PLAN_MAX = 1000
 
 --- ns.economy(tip, front): the cheapest settings on a measured speed-against-accuracy front
 --- (scripts/needlesim/fronts.lua, written by tools/speed_accuracy.py) whose measured error
@@ -1197,6 +1201,49 @@ local function live_of(v, where)
     return l
 end
 
+-- dosimetry = {prescription, strength, source, spacing, prostate, urethra, rectum, plan}: the
+-- TG-43 dose of the seeds as planned and as delivered, read as the guidelines' dose-volume
+-- figures (docs/brachytherapy.md). prescription [Gy] (145, I-125 monotherapy), strength: each
+-- seed's air-kerma strength [U], spacing: the dose grid's [m], prostate/urethra/rectum: region
+-- names, plan: the planned seed centres in the undeformed anatomy (default: the targets of the
+-- scenario's `seeds`, in order).
+local function dosimetry_of(v, t, where)
+    if v == nil then
+        return nil
+    end
+    local a = args(v, "ns.scenario: dosimetry", where, DOSIMETRY_FIELDS)
+    local d = {
+        prescription = a:number("prescription", function(x) return x > 0 and x <= 1000 end,
+            "in (0, 1000] [Gy]", 145),
+        strength = a:number("strength", function(x) return x > 0 and x <= 10 end,
+            "in (0, 10] [U]", 0.5),
+        source = a:choice("source", { "i125_6711" }, "i125_6711"),
+        spacing = a:number("spacing", function(x) return x >= 0.5e-3 and x <= 5e-3 end,
+            "in [0.5e-3, 5e-3] [m]", 1e-3),
+        prostate = a:name("prostate", nil, "prostate"),
+        urethra = a:name("urethra", nil, "urethra"),
+        rectum = a:name("rectum", nil, "rectum"),
+        plan = {},
+    }
+    local plan = a:get("plan")
+    if plan ~= nil then
+        if type(plan) ~= "table" or kind_of(plan) or #plan < 1 or #plan > DOSE_PLAN_MAX then
+            a:fail("plan must be a list of 1 to %d seed centres {x, y, z} [m] (got %s)",
+                DOSE_PLAN_MAX, describe(plan))
+        end
+        for i, p in ipairs(plan) do
+            local out = vector(p, 3, ANY)
+            if not out then
+                a:fail("plan[%d] must be {x, y, z}: 3 numbers [m] (got %s)", i, describe(p))
+            end
+            d.plan[i] = out
+        end
+    elseif t.seeds == nil then
+        a:fail("needs a plan: plan = {{x, y, z}, ...} or the scenario's seeds = {{target = ...}}")
+    end
+    return d
+end
+
 --- ns.scenario{name, tissue, description, seed, dt, duration, script, on_tick, ...}
 function ns.scenario(t)
     local where = where_of(2)
@@ -1258,6 +1305,7 @@ function ns.scenario(t)
     end
     sc.camera = camera_of(t.camera, where, sc.dt or 0.01)
     sc.live = live_of(t.live, where)
+    sc.dosimetry = dosimetry_of(t.dosimetry, t, where)
     for _, k in ipairs(RESERVED) do
         sc[k] = t[k]
     end

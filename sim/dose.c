@@ -453,3 +453,37 @@ void ns_dose_grid_free(NsDoseGrid *g)
     free(g->dose);
     g->dose = NULL;
 }
+
+int ns_dose_points(const NsTg43Source *s, const NsDoseSeed *seeds, int n_seeds, const double *pts,
+                   long n, int threads, double *out, char *err, int err_sz)
+{
+    if (ns_tg43_check(s, err, err_sz) || ns_dose_check_seeds(seeds, n_seeds, err, err_sz))
+        return -1;
+    if (n < 0 || n > NS_DOSE_MAX_VOXELS || (n > 0 && (!pts || !out))) {
+        ns_set_err(err, err_sz, "%ld dose points: must be 0..%ld", n, NS_DOSE_MAX_VOXELS);
+        return -1;
+    }
+    SeedPrep *q = malloc((size_t)(n_seeds > 0 ? n_seeds : 1) * sizeof *q);
+    if (!q) {
+        ns_set_err(err, err_sz, "dose points: out of memory (%d seeds)", n_seeds);
+        return -1;
+    }
+    Prep P;
+    prep_source(s, &P);
+    for (int m = 0; m < n_seeds; m++)
+        prep_seed(&P, &seeds[m], &q[m]);
+#if NS_HAVE_OPENMP
+    int chunks = threads > 1 ? threads : 1;
+#pragma omp parallel for num_threads(chunks) schedule(static) if (chunks > 1 && n > 1024)
+#else
+    (void)threads;
+#endif
+    for (long i = 0; i < n; i++) {
+        double sum = 0.0;
+        for (int m = 0; m < n_seeds; m++)
+            sum += seed_dose(&P, &q[m], pts + 3 * i);
+        out[i] = sum;
+    }
+    free(q);
+    return 0;
+}

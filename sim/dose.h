@@ -113,4 +113,11 @@ int ns_dose_grid(const NsTg43Source *s, const NsDoseSeed *seeds, int n_seeds, co
 
 void ns_dose_grid_free(NsDoseGrid *g);
 
+/* Total dose to full decay [Gy] at each of n points (pts: n x 3 [m]) into out (n), as
+ * ns_dose_at, the seeds summed in order (so the result does not depend on threads; threads > 1
+ * splits the points over OpenMP threads when the build has OpenMP). Returns 0, or -1 with err
+ * (bad source or seeds, n outside 0..NS_DOSE_MAX_VOXELS, out of memory). */
+int ns_dose_points(const NsTg43Source *s, const NsDoseSeed *seeds, int n_seeds, const double *pts,
+                   long n, int threads, double *out, char *err, int err_sz);
+
 #endif

@@ -72,6 +72,13 @@
 #define NS_LIMIT_LOG_FILE_BYTES ((long long)256 << 20)
 /* A scenario file or module [bytes]. */
 #define NS_LIMIT_SCRIPT_FILE_BYTES ((long long)16 << 20)
+/* A scenario's dosimetry (engine/run_spec.c; scripts/needlesim.lua checks the same): planned
+ * seeds, prescription [Gy], a seed's air-kerma strength [U], the dose grid's spacing [m]. */
+#define NS_LIMIT_DOSE_PLAN_SEEDS   1000
+#define NS_LIMIT_DOSE_PRESCRIPTION 1000.0
+#define NS_LIMIT_DOSE_STRENGTH     10.0
+#define NS_LIMIT_DOSE_SPACING_MIN  0.5e-3
+#define NS_LIMIT_DOSE_SPACING_MAX  5e-3
 /* A dosimetry table (the assets/tg43 CSV files) [bytes]: the 6711 table is ~4 kB. */
 #define NS_LIMIT_DOSE_TABLE_BYTES ((long long)1 << 20)
 

@@ -394,6 +394,21 @@ expect_error "needle: bevel_force without the force model" 1 \
 expect_error "needle: bevel_force out of range" 1 \
     "tests/data/bad_bevel_force_range.lua:7: ns.needle: bevel_force must be a number in [0, 10] [N] (got 50)" -- \
     check tests/data/bad_bevel_force_range.lua
+expect_error "dosimetry: misspelt field" 1 \
+    "tests/data/bad_dosimetry_field.lua:3: ns.scenario: dosimetry: unknown field 'prescripton'" \
+    "did you mean 'prescription'" -- check tests/data/bad_dosimetry_field.lua
+expect_error "dosimetry: dose grid spacing out of range" 1 \
+    "tests/data/bad_dosimetry_spacing.lua:3: ns.scenario: dosimetry: spacing must be a number in [0.5e-3, 5e-3] [m] (got 1e-05)" -- \
+    check tests/data/bad_dosimetry_spacing.lua
+expect_error "dosimetry: no plan and no seeds" 1 \
+    "tests/data/bad_dosimetry_noplan.lua:3: ns.scenario: dosimetry: needs a plan" -- \
+    check tests/data/bad_dosimetry_noplan.lua
+expect_error "dosimetry: a region the tissue lacks" 1 \
+    "tests/data/bad_dosimetry_region.lua:3: ns.scenario: dosimetry.prostate: 'prostate' is not a region of the tissue" -- \
+    run tests/data/bad_dosimetry_region.lua --steps 1 --no-render -o "$TMP/o_dose_region"
+expect_error "dosimetry: a planned seed outside the tissue" 1 \
+    "tests/data/dosimetry_small.lua:6: ns.scenario: dosimetry.plan[2] at (0.002, 0, 0.5) m is not a point inside the tissue" -- \
+    run tests/data/dosimetry_small.lua --set seed2_z=0.5 --steps 1 --no-render -o "$TMP/o_dose_plan"
 expect_error "solver: tolerance out of range" 1 \
     "tests/data/bad_solver.lua:2: ns.scenario: solver: tolerance must be a number in (0, 1)" -- \
     check tests/data/bad_solver.lua

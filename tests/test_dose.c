@@ -6,6 +6,7 @@
 #include <stdlib.h>
 
 #include "dose.h"
+#include "dvh.h"
 #include "ns_test.h"
 
 #define DEG (M_PI / 180.0)
@@ -191,6 +192,119 @@ static int test_bad_input(void)
     return 0;
 }
 
+/* ns_dose_points at the grid's voxel centres is the grid, bit for bit, with 1 or 2 threads. */
+static int test_points_are_grid(void)
+{
+    NsTg43Source s = source();
+    NsDoseSeed seeds[2] = {{{0.002, 0.001, -0.003}, {0, 0, 1}, NS_TG43_UNIT_U},
+                           {{-0.004, 0.0005, 0.002}, {1, 1, 0}, 0.7 * NS_TG43_UNIT_U}};
+    NsDoseGrid g;
+    ENSURE(ns_dose_grid(&s, seeds, 2, LO, HI, 1e-3, 1, &g, NULL, 0) == 0);
+    static double pts[8000 * 3], one[8000], two[8000];
+    for (int k = 0; k < 20; k++)
+        for (int j = 0; j < 20; j++)
+            for (int i = 0; i < 20; i++) {
+                double *p = pts + 3 * ((k * 20 + j) * 20 + i);
+                p[0] = LO[0] + (i + 0.5) * 1e-3;
+                p[1] = LO[1] + (j + 0.5) * 1e-3;
+                p[2] = LO[2] + (k + 0.5) * 1e-3;
+            }
+    ENSURE(ns_dose_points(&s, seeds, 2, pts, 8000, 1, one, NULL, 0) == 0);
+    ENSURE(ns_dose_points(&s, seeds, 2, pts, 8000, 2, two, NULL, 0) == 0);
+    ENSURE(ns_same_bits(one, g.dose, 8000));
+    ENSURE(ns_same_bits(one, two, 8000));
+    char err[256];
+    ENSURE(ns_dose_points(&s, seeds, 2, pts, -1, 1, one, err, sizeof err) == -1);
+    seeds[1].sk = 0.0;
+    ENSURE(ns_dose_points(&s, seeds, 2, pts, 8000, 1, one, err, sizeof err) == -1);
+    ENSURE(strstr(err, "seed 2") != NULL);
+    ns_dose_grid_free(&g);
+    return 0;
+}
+
+/* The dose-volume readings on a region whose answers are counted by hand: ten voxels of 2 cc
+ * (2e-6 m^3) with doses 1..10 Gy in scrambled order. */
+static int test_dvh_readings(void)
+{
+    const double dose[10] = {7, 2, 9, 4, 10, 1, 5, 3, 8, 6};
+    NsDvh d;
+    char err[256];
+    ENSURE(ns_dvh_make(&d, dose, 10, 2e-6, err, sizeof err) == 0);
+    ENSURE(d.dose[0] == 10 && d.dose[9] == 1);
+    ENSURE(ns_dvh_d_pct(&d, 90) == 2);  /* the 9 hottest voxels get >= 2 Gy */
+    ENSURE(ns_dvh_d_pct(&d, 10) == 10); /* the hottest one */
+    ENSURE(ns_dvh_d_pct(&d, 30) == 8);
+    ENSURE(ns_dvh_d_pct(&d, 100) == 1);
+    ENSURE(ns_dvh_d_pct(&d, 25) == 8);    /* 2.5 voxels: the third hottest */
+    ENSURE(ns_dvh_d_vol(&d, 2e-6) == 10); /* D2cc: one voxel */
+    ENSURE(ns_dvh_d_vol(&d, 5e-6) == 8);  /* 2.5 voxels */
+    ENSURE(ns_dvh_d_vol(&d, 1.0) == 1);   /* more than the region: all of it */
+    ENSURE(ns_dvh_v_pct(&d, 5) == 60);    /* 5..10 */
+    ENSURE(ns_dvh_v_pct(&d, 5.5) == 50);  /* 6..10 */
+    ENSURE(ns_dvh_v_pct(&d, 11) == 0);
+    ENSURE(ns_dvh_v_pct(&d, 0) == 100);
+    ENSURE_SMALL(ns_dvh_v_vol(&d, 9) - 4e-6, 1e-18);
+    ns_dvh_free(&d);
+    const double bad[2] = {1, NAN};
+    ENSURE(ns_dvh_make(&d, bad, 2, 1e-9, err, sizeof err) == -1 && d.dose == NULL);
+    ENSURE(ns_dvh_make(&d, dose, 0, 1e-9, err, sizeof err) == -1);
+    ENSURE(ns_dvh_make(&d, dose, 3, 0.0, err, sizeof err) == -1);
+    const double neg[1] = {-1};
+    ENSURE(ns_dvh_make(&d, neg, 1, 1e-9, err, sizeof err) == -1);
+    return 0;
+}
+
+/* The DVH of a sphere around an isotropic point source (L = 0, g = F = 1): the dose falls as
+ * K / r^2, so the hottest fraction f of the sphere's volume is the ball of radius R f^(1/3):
+ * D90 = K / (R 0.9^(1/3))^2, and the volume receiving K / (R/2)^2 is the ball of radius R/2,
+ * 12.5 %. Voxel centres inside the sphere, 0.5 mm apart, sample it. */
+static int test_dvh_sphere_analytic(void)
+{
+    NsTg43Source s;
+    memset(&s, 0, sizeof s);
+    s.lambda = 1e4;
+    s.length = 0.0;
+    s.half_life = 59.4 * 86400.0;
+    s.n_g = 2;
+    s.g_r[0] = 0.001;
+    s.g_r[1] = 0.1;
+    s.g[0] = s.g[1] = 1.0;
+    s.n_fr = 1;
+    s.f_r[0] = 0.01;
+    s.n_ft = 2;
+    s.f_theta[1] = M_PI / 2;
+    s.f[0] = s.f[1] = 1.0;
+    NsDoseSeed seed = {{0, 0, 0}, {0, 0, 1}, NS_TG43_UNIT_U};
+    const double R = 0.015, h = 0.5e-3;
+    const int m = (int)(R / h);
+    long n = 0;
+    double *pts = malloc((size_t)8 * m * m * m * 3 * sizeof *pts);
+    ENSURE(pts != NULL);
+    for (int k = -m; k < m; k++)
+        for (int j = -m; j < m; j++)
+            for (int i = -m; i < m; i++) {
+                double p[3] = {(i + 0.5) * h, (j + 0.5) * h, (k + 0.5) * h};
+                if (p[0] * p[0] + p[1] * p[1] + p[2] * p[2] <= R * R) {
+                    memcpy(pts + 3 * n, p, sizeof p);
+                    n++;
+                }
+            }
+    double *dose = malloc((size_t)n * sizeof *dose);
+    ENSURE(dose != NULL);
+    ENSURE(ns_dose_points(&s, &seed, 1, pts, n, 1, dose, NULL, 0) == 0);
+    NsDvh d;
+    ENSURE(ns_dvh_make(&d, dose, n, h * h * h, NULL, 0) == 0);
+    double K = NS_TG43_UNIT_U * s.lambda * ns_tg43_mean_life(&s) * NS_TG43_R0 * NS_TG43_R0;
+    double r90 = R * cbrt(0.9);
+    ENSURE_SMALL(ns_dvh_d_pct(&d, 90) / (K / (r90 * r90)) - 1.0, 0.01);
+    ENSURE_SMALL(ns_dvh_v_pct(&d, K / (0.25 * R * R)) / 12.5 - 1.0, 0.02); /* a 15-voxel ball */
+    ENSURE_SMALL(ns_dvh_v_vol(&d, 0.0) / (4.0 / 3.0 * M_PI * R * R * R) - 1.0, 0.01);
+    ns_dvh_free(&d);
+    free(dose);
+    free(pts);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     static const NsTestCase cases[] = {
@@ -201,6 +315,9 @@ int main(int argc, char **argv)
         {"superposition_and_threads", test_superposition_and_threads},
         {"symmetric_about_axis", test_symmetric_about_axis},
         {"bad_input", test_bad_input},
+        {"points_are_grid", test_points_are_grid},
+        {"dvh_readings", test_dvh_readings},
+        {"dvh_sphere_analytic", test_dvh_sphere_analytic},
     };
     return ns_test_main(argc, argv, cases, (int)(sizeof cases / sizeof cases[0]));
 }

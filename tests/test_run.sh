@@ -9,8 +9,9 @@
 #
 # With `brachytherapy` as third argument it runs the brachytherapy scenario instead (a separate
 # meson test, not in the sanitizer build): it succeeds, every report field is finite, both seeds
-# are released, the shipped script hits at least one target, and no obstacle is entered; and
-# its recorded log replays to the same state. With `scenarios`, every other shipped scenario
+# are released, the shipped script hits at least one target, and no obstacle is entered; its
+# dosimetry (planned and delivered figures, dvh.csv) is complete and consistent; and its
+# recorded log replays to the same state. With `scenarios`, every other shipped scenario
 # runs with a finite report.
 #
 # usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR [tutorial|brachytherapy|scenarios]
@@ -79,6 +80,44 @@ print("ffprobe: %s; %.1f ms a frame to render, %.1f to encode, %.0f %% of the wa
     100 * r["render"]["share_of_wall"]))
 PY
 if [ $? = 0 ]; then pass "brachytherapy video and summary.png ($(cat "$TMP/py_v"))"; else fail "video" "$(tail -1 "$TMP/py_v")"; fi
+# Issue 38: the dosimetry of the four seeds, planned (at the targets) and delivered; dvh.csv.
+python3 - "$TMP/b" <<'PY' >"$TMP/py_d" 2>&1
+import csv, json, math, sys
+d = sys.argv[1]
+r = json.load(open(d + "/report.json"))
+ds = r["dosimetry"]
+assert ds["prescription_gy"] == 145 and ds["dose_ms"] > 0, ds
+for k in ("planned", "delivered"):
+    f = ds[k]
+    assert f["seeds"] == 4, (k, f)
+    for key in ("prostate_d90_gy", "prostate_v100_pct", "prostate_v150_pct", "urethra_d10_gy",
+                "rectum_d2cc_gy"):
+        assert math.isfinite(f[key]) and f[key] >= 0, (k, key, f)
+    assert 0 <= f["prostate_v150_pct"] <= f["prostate_v100_pct"] <= 100, f
+    assert f["urethra_d10_gy"] >= f["urethra_d30_gy"] > 0, f
+    assert abs(f["prostate_d90_pct"] - 100 * f["prostate_d90_gy"] / 145) < 1e-9, f
+# the seeds' displacements: each seed's material point against its target's
+each = ds["seed_displacement_mm"]["each"]
+assert len(each) == 4 and all(0 <= e < 20 for e in each), each
+assert abs(max(each) - ds["seed_displacement_mm"]["max"]) < 1e-12
+vol = ds["volume_cc"]
+assert 10 < vol["prostate"] < 19 and vol["urethra"] > 1 and vol["rectum"] > 10, vol
+rows = list(csv.reader(open(d + "/dvh.csv")))
+assert rows[0] == ["dose_gy"] + ["%s_%s_pct" % (g, k) for g in ("prostate", "urethra", "rectum")
+                                 for k in ("planned", "delivered")], rows[0]
+assert len(rows) == 302 and abs(float(rows[-1][0]) - 435) < 1e-9, (len(rows), rows[-1])
+cols = list(zip(*[[float(x) for x in row] for row in rows[1:]]))
+assert all(c[0] == 100 for c in cols[1:]), rows[1]
+assert all(all(a >= b for a, b in zip(c, c[1:])) for c in cols[1:]), "a DVH rises"
+# the row at the prescription is V100
+at = rows[1 + 100]
+assert abs(float(at[1]) - ds["planned"]["prostate_v100_pct"]) < 1e-4, (at, ds["planned"])
+assert abs(float(at[2]) - ds["delivered"]["prostate_v100_pct"]) < 1e-4, (at, ds["delivered"])
+print("prostate D90 planned %.1f Gy, delivered %.1f Gy; seeds moved %.1f mm on average; %.0f ms"
+      % (ds["planned"]["prostate_d90_gy"], ds["delivered"]["prostate_d90_gy"],
+         ds["seed_displacement_mm"]["mean"], ds["dose_ms"]))
+PY
+if [ $? = 0 ]; then pass "dosimetry: planned and delivered figures, dvh.csv ($(cat "$TMP/py_d"))"; else fail "dosimetry" "$(tail -1 "$TMP/py_d")"; fi
 # The log replayed (seed events included): the same state and score.
 "$BIN" run "$SRC/scenarios/brachytherapy.lua" --no-render -o "$TMP/b2" --replay "$TMP/b.csv" \
     --quiet >/dev/null 2>"$TMP/err2"
@@ -821,6 +860,30 @@ if [ $rc = 2 ] && grep -q -- "--width" "$TMP/err_r5"; then pass "odd --width: ex
 "$BIN" run "$TUT" -o "$TMP/r6" --video "$TMP/r6.avi" >/dev/null 2>"$TMP/err_r6"
 rc=$?
 if [ $rc = 2 ] && grep -q "mp4" "$TMP/err_r6"; then pass "--video not .mp4: exit 2"; else fail "--video .avi" "exit $rc"; fi
+
+# dosimetry = {plan = {...}} without seeds dropped: the planned figures, a delivered dose of
+# nothing; an earlier dvh.csv that is a folder fails the run before it starts.
+"$BIN" run "$SRC/tests/data/dosimetry_small.lua" -o "$TMP/dsm" --steps 5 --no-render --quiet \
+    >/dev/null 2>"$TMP/err_dsm"
+python3 - "$TMP/dsm" <<'PY' >"$TMP/py_dsm" 2>&1
+import json, sys
+ds = json.load(open(sys.argv[1] + "/report.json"))["dosimetry"]
+p, d = ds["planned"], ds["delivered"]
+assert p["seeds"] == 2 and p["prostate_d90_gy"] > 0 and p["urethra_d10_gy"] > 0, p
+assert d["seeds"] == 0 and d["prostate_d90_gy"] == 0 and d["prostate_v100_pct"] == 0, d
+assert ds["seed_displacement_mm"]["each"] == [], ds
+print("planned D90 %.1f Gy from 2 seeds" % p["prostate_d90_gy"])
+PY
+if [ $? = 0 ] && [ -f "$TMP/dsm/dvh.csv" ]; then pass "dosimetry from a plan list ($(cat "$TMP/py_dsm"))"; else fail "dosimetry from a plan list" "$(head -1 "$TMP/err_dsm") $(tail -1 "$TMP/py_dsm")"; fi
+mkdir -p "$TMP/dsm2/dvh.csv"
+"$BIN" run "$SRC/tests/data/dosimetry_small.lua" -o "$TMP/dsm2" --steps 5 --no-render --quiet \
+    >/dev/null 2>"$TMP/err_dsm2"
+rc=$?
+if [ $rc = 1 ] && grep -q "dose-volume" "$TMP/err_dsm2" && [ ! -e "$TMP/dsm2/report.json" ]; then
+    pass "dvh.csv a folder: exit 1 before the run, nothing written"
+else
+    fail "dvh.csv a folder" "exit $rc: $(head -1 "$TMP/err_dsm2")"
+fi
 
 echo "$PASSED passed, $FAILED failed"
 [ "$FAILED" = 0 ]

@@ -1,0 +1,390 @@
+/* A scenario's dosimetry in a run (docs/brachytherapy.md): the TG-43U1 dose of its seeds read as
+ * the guidelines' dose-volume figures, once with every seed where the plan puts it and once
+ * with every seed where the simulated tissue left it.
+ *
+ * Both are evaluated in the undeformed anatomy (the mesh as built): a planned seed is a point of
+ * it, and a released seed is the material point the tissue carried (ns_run_release_seed), so
+ * after the needles are out and the tissue has relaxed its material point is where it lies in
+ * the anatomy. The regions' voxels are the centres of a grid at the scenario's spacing that
+ * fall in a tet of the region. Each seed lies along the first needle's axis (the template's
+ * normal); its turning with the tissue is not followed. */
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dose.h"
+#include "dose_table.h"
+#include "dvh.h"
+#include "err.h"
+#include "out_files.h"
+#include "remesh.h"
+#include "run.h"
+
+enum { PLANNED, DELIVERED };
+static const char *const region_key[3] = {"prostate", "urethra", "rectum"};
+
+struct NsRunDose {
+    NsTg43Source src;
+    double axis[3];
+    double *pts;          /* voxel centres in the three regions (n x 3) [m] */
+    unsigned char *which; /* (n) 0 prostate, 1 urethra, 2 rectum */
+    long n, count[3];
+    double *dose[2]; /* (n) planned, delivered [Gy] */
+    NsDvh dvh[2][3]; /* [planned|delivered][region] */
+    int seeds[2];    /* seed counts */
+    double *disp;    /* (disp_n) delivered seed k against planned seed k [m] */
+    int disp_n;
+    double ms;     /* wall time of all of the above [ms] */
+    char *csv_tmp; /* DIR/.dvh.csv.part */
+};
+
+/* The voxel centres of the three regions in the mesh as built. */
+static int voxelize(NsRun *r, struct NsRunDose *D, char *err, int err_sz)
+{
+    const NsMesh *m = &r->orig;
+    const NsRunDosimetry *ds = &r->spec.dosimetry;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int t = 0; t < m->tet_slots; t++) {
+        if (!ns_mesh_tet_alive(m, t))
+            continue;
+        int reg = m->tet_region[t];
+        if (reg != ds->region[0] && reg != ds->region[1] && reg != ds->region[2])
+            continue;
+        for (int k = 0; k < 4; k++)
+            for (int c = 0; c < 3; c++) {
+                double u = m->u[3 * m->tet_node[4 * t + k] + c];
+                lo[c] = fmin(lo[c], u);
+                hi[c] = fmax(hi[c], u);
+            }
+    }
+    double h = ds->spacing, cells = 1.0;
+    int n[3];
+    for (int c = 0; c < 3; c++) {
+        if (!(hi[c] > lo[c])) {
+            ns_set_err(err, err_sz, "%s: ns.scenario: dosimetry: the regions have no tets",
+                       r->sc.where);
+            return -1;
+        }
+        n[c] = (int)fmax(1.0, ceil((hi[c] - lo[c]) / h - 1e-9));
+        cells *= n[c];
+    }
+    if (cells > (double)NS_DOSE_MAX_VOXELS) {
+        ns_set_err(err, err_sz,
+                   "%s: ns.scenario: dosimetry: the regions' box holds %.3g voxels at spacing %g "
+                   "m (at most %ld)",
+                   r->sc.where, cells, h, NS_DOSE_MAX_VOXELS);
+        return -1;
+    }
+    long cap = 1024;
+    D->pts = malloc((size_t)cap * 3 * sizeof *D->pts);
+    D->which = malloc((size_t)cap);
+    int hint = -1;
+    for (int k = 0; D->pts && D->which && k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                double p[3] = {lo[0] + (i + 0.5) * h, lo[1] + (j + 0.5) * h, lo[2] + (k + 0.5) * h};
+                int t = ns_mesh_locate(m, p, hint, 1e-9, NULL);
+                if (t < 0)
+                    continue;
+                hint = t;
+                int w = -1;
+                for (int q = 2; q >= 0; q--) /* urethra before prostate: the regions are disjoint */
+                    if (m->tet_region[t] == ds->region[q])
+                        w = q;
+                if (w < 0)
+                    continue;
+                if (D->n == cap) {
+                    cap *= 2;
+                    double *np = realloc(D->pts, (size_t)cap * 3 * sizeof *np);
+                    if (np)
+                        D->pts = np;
+                    unsigned char *nw = np ? realloc(D->which, (size_t)cap) : NULL;
+                    if (!nw) {
+                        ns_set_err(err, err_sz, "out of memory");
+                        return -1;
+                    }
+                    D->which = nw;
+                }
+                memcpy(D->pts + 3 * D->n, p, sizeof p);
+                D->which[D->n++] = (unsigned char)w;
+                D->count[w]++;
+            }
+    if (!D->pts || !D->which) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    for (int q = 0; q < 3; q++)
+        if (D->count[q] == 0) {
+            ns_set_err(err, err_sz,
+                       "%s: ns.scenario: dosimetry.%s: the region holds no voxel centre at spacing "
+                       "%g m",
+                       r->sc.where, region_key[q], h);
+            return -1;
+        }
+    return 0;
+}
+
+/* The dose at every voxel from seeds at the given material points, and its three DVHs. */
+static int dose_of(NsRun *r, struct NsRunDose *D, int which, const double *pos, int n_seeds,
+                   char *err, int err_sz)
+{
+    NsDoseSeed *seeds = malloc((size_t)(n_seeds > 0 ? n_seeds : 1) * sizeof *seeds);
+    D->dose[which] = malloc((size_t)D->n * sizeof(double));
+    double *split = malloc((size_t)D->n * sizeof(double));
+    int rc = seeds && D->dose[which] && split ? 0 : -1;
+    if (rc)
+        ns_set_err(err, err_sz, "out of memory");
+    for (int k = 0; rc == 0 && k < n_seeds; k++) {
+        memcpy(seeds[k].pos, pos + 3 * k, sizeof seeds[k].pos);
+        memcpy(seeds[k].axis, D->axis, sizeof D->axis);
+        seeds[k].sk = r->spec.dosimetry.strength;
+    }
+    char e2[256];
+    if (rc == 0 && ns_dose_points(&D->src, seeds, n_seeds, D->pts, D->n, r->opt.threads,
+                                  D->dose[which], e2, sizeof e2)) {
+        ns_set_err(err, err_sz, "%s: dosimetry: %s", r->sc.path, e2);
+        rc = -1;
+    }
+    for (int q = 0; rc == 0 && q < 3; q++) {
+        long c = 0;
+        for (long i = 0; i < D->n; i++)
+            if (D->which[i] == q)
+                split[c++] = D->dose[which][i];
+        double h = r->spec.dosimetry.spacing;
+        if (ns_dvh_make(&D->dvh[which][q], split, c, h * h * h, e2, sizeof e2)) {
+            ns_set_err(err, err_sz, "%s: dosimetry: %s: %s", r->sc.path, region_key[q], e2);
+            rc = -1;
+        }
+    }
+    D->seeds[which] = n_seeds;
+    free(seeds);
+    free(split);
+    return rc;
+}
+
+int ns_run_dosimetry_begin(NsRun *r, char *err, int err_sz)
+{
+    const NsRunDosimetry *ds = &r->spec.dosimetry;
+    if (!ds->on)
+        return 0;
+    double w0 = ns_wall_s();
+    struct NsRunDose *D = calloc(1, sizeof *D);
+    if (!D) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    r->dose = D;
+    /* DIR/dvh.csv will replace only a regular file: checked before the run, not at its end */
+    char *old = r->opt.out_dir ? ns_run_path_join(r->opt.out_dir, "dvh.csv") : NULL;
+    int bad = old && ns_out_replaceable(old, "the dose-volume histograms", err, err_sz);
+    free(old);
+    if (bad)
+        return -1;
+    memcpy(D->axis, r->spec.entry_dir, sizeof D->axis);
+    char e2[512];
+    if (ns_tg43_load_6711(&D->src, e2, sizeof e2)) {
+        ns_set_err(err, err_sz, "%s: ns.scenario: dosimetry: %s", r->sc.where, e2);
+        return -1;
+    }
+    if (voxelize(r, D, err, err_sz) || dose_of(r, D, PLANNED, ds->plan, ds->plan_n, err, err_sz))
+        return -1;
+    D->ms += 1e3 * (ns_wall_s() - w0);
+    return 0;
+}
+
+int ns_run_dosimetry_end(NsRun *r, char *err, int err_sz)
+{
+    struct NsRunDose *D = r->dose;
+    if (!D)
+        return 0;
+    double w0 = ns_wall_s();
+    int n = r->seed_n;
+    double *u = malloc((size_t)(n > 0 ? n : 1) * 3 * sizeof *u);
+    if (!u) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    for (int k = 0; k < n; k++)
+        memcpy(u + 3 * k, r->seeds[k].u, 3 * sizeof *u);
+    int rc = dose_of(r, D, DELIVERED, u, n, err, err_sz);
+    free(u);
+    if (rc)
+        return -1;
+    const NsRunDosimetry *ds = &r->spec.dosimetry;
+    D->disp_n = n < ds->plan_n ? n : ds->plan_n;
+    D->disp = malloc((size_t)(D->disp_n > 0 ? D->disp_n : 1) * sizeof *D->disp);
+    if (!D->disp) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    for (int k = 0; k < D->disp_n; k++) {
+        double s = 0.0;
+        for (int c = 0; c < 3; c++) {
+            double d = r->seeds[k].u[c] - ds->plan[3 * k + c];
+            s += d * d;
+        }
+        D->disp[k] = sqrt(s);
+    }
+    D->ms += 1e3 * (ns_wall_s() - w0);
+    return 0;
+}
+
+static void figures_json(NsJson *j, const char *key, const struct NsRunDose *D, int w, double rx)
+{
+    const NsDvh *p = &D->dvh[w][0], *u = &D->dvh[w][1], *rc = &D->dvh[w][2];
+    ns_json_key(j, key);
+    ns_json_begin_object(j);
+    ns_json_key(j, "seeds");
+    ns_json_int(j, D->seeds[w]);
+    ns_json_key(j, "prostate_d90_gy");
+    ns_json_number(j, ns_dvh_d_pct(p, 90));
+    ns_json_key(j, "prostate_d90_pct");
+    ns_json_number(j, 100.0 * ns_dvh_d_pct(p, 90) / rx);
+    ns_json_key(j, "prostate_v100_pct");
+    ns_json_number(j, ns_dvh_v_pct(p, rx));
+    ns_json_key(j, "prostate_v150_pct");
+    ns_json_number(j, ns_dvh_v_pct(p, 1.5 * rx));
+    ns_json_key(j, "prostate_v200_pct");
+    ns_json_number(j, ns_dvh_v_pct(p, 2.0 * rx));
+    ns_json_key(j, "urethra_d10_gy");
+    ns_json_number(j, ns_dvh_d_pct(u, 10));
+    ns_json_key(j, "urethra_d30_gy");
+    ns_json_number(j, ns_dvh_d_pct(u, 30));
+    ns_json_key(j, "rectum_d2cc_gy");
+    ns_json_number(j, ns_dvh_d_vol(rc, 2e-6));
+    ns_json_key(j, "rectum_v100_cc");
+    ns_json_number(j, 1e6 * ns_dvh_v_vol(rc, rx));
+    ns_json_end_object(j);
+}
+
+void ns_run_dosimetry_json(NsJson *j, const NsRun *r)
+{
+    const struct NsRunDose *D = r->dose;
+    if (!D || !D->dose[DELIVERED])
+        return;
+    const NsRunDosimetry *ds = &r->spec.dosimetry;
+    double h = ds->spacing;
+    ns_json_key(j, "dosimetry");
+    ns_json_begin_object(j);
+    ns_json_key(j, "prescription_gy");
+    ns_json_number(j, ds->prescription);
+    ns_json_key(j, "source");
+    ns_json_string(j, "I-125 model 6711, TG-43U1 line source");
+    ns_json_key(j, "strength_u");
+    ns_json_number(j, ds->strength / NS_TG43_UNIT_U);
+    ns_json_key(j, "spacing_m");
+    ns_json_number(j, h);
+    ns_json_key(j, "volume_cc");
+    ns_json_begin_object(j);
+    for (int q = 0; q < 3; q++) {
+        ns_json_key(j, region_key[q]);
+        ns_json_number(j, 1e6 * (double)D->count[q] * h * h * h);
+    }
+    ns_json_end_object(j);
+    figures_json(j, "planned", D, PLANNED, ds->prescription);
+    figures_json(j, "delivered", D, DELIVERED, ds->prescription);
+    ns_json_key(j, "seed_displacement_mm");
+    ns_json_begin_object(j);
+    double sum = 0.0, mx = 0.0;
+    for (int k = 0; k < D->disp_n; k++) {
+        sum += D->disp[k];
+        mx = fmax(mx, D->disp[k]);
+    }
+    ns_json_key(j, "mean");
+    ns_json_number(j, D->disp_n ? 1e3 * sum / D->disp_n : 0.0);
+    ns_json_key(j, "max");
+    ns_json_number(j, 1e3 * mx);
+    ns_json_key(j, "each");
+    ns_json_begin_array(j);
+    for (int k = 0; k < D->disp_n; k++)
+        ns_json_number(j, 1e3 * D->disp[k]);
+    ns_json_end_array(j);
+    ns_json_end_object(j);
+    ns_json_key(j, "dose_ms");
+    ns_json_number(j, D->ms);
+    ns_json_end_object(j);
+}
+
+/* DIR/dvh.csv: the cumulative DVHs, % of each region's volume receiving at least each dose,
+ * from 0 to 3x the prescription in steps of 1% of it. Written as a part file, renamed by
+ * ns_run_dosimetry_commit. */
+int ns_run_dosimetry_write(NsRun *r, char *err, int err_sz)
+{
+    struct NsRunDose *D = r->dose;
+    if (!D || !D->dose[DELIVERED])
+        return 0;
+    D->csv_tmp = ns_run_path_join(r->opt.out_dir, ".dvh.csv.part");
+    if (!D->csv_tmp) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    FILE *f = ns_out_create_part(D->csv_tmp, "the dose-volume histograms", err, err_sz);
+    if (!f)
+        return -1;
+    fputs("dose_gy", f);
+    for (int q = 0; q < 3; q++)
+        fprintf(f, ",%s_planned_pct,%s_delivered_pct", region_key[q], region_key[q]);
+    fputc('\n', f);
+    double rx = r->spec.dosimetry.prescription;
+    for (int s = 0; s <= 300; s++) {
+        double d = rx * s / 100.0;
+        fprintf(f, "%.6g", d);
+        for (int q = 0; q < 3; q++)
+            fprintf(f, ",%.6g,%.6g", ns_dvh_v_pct(&D->dvh[PLANNED][q], d),
+                    ns_dvh_v_pct(&D->dvh[DELIVERED][q], d));
+        fputc('\n', f);
+    }
+    int bad = ferror(f) != 0;
+    if ((fclose(f) != 0) | bad) {
+        ns_set_err(err, err_sz, "cannot write '%s': %s", D->csv_tmp, strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
+int ns_run_dosimetry_commit(NsRun *r)
+{
+    struct NsRunDose *D = r->dose;
+    if (!D || !D->csv_tmp)
+        return 0;
+    char *final = ns_run_path_join(r->opt.out_dir, "dvh.csv");
+    int rc = !final || ns_out_commit(D->csv_tmp, final) ? -1 : 0;
+    free(final);
+    if (rc == 0) {
+        free(D->csv_tmp);
+        D->csv_tmp = NULL;
+    }
+    return rc;
+}
+
+void ns_run_dosimetry_uncommit(NsRun *r)
+{
+    if (!r->dose || r->dose->csv_tmp || !r->dose->dose[DELIVERED])
+        return;
+    char *final = ns_run_path_join(r->opt.out_dir, "dvh.csv");
+    if (final)
+        remove(final);
+    free(final);
+}
+
+void ns_run_dosimetry_free(NsRun *r)
+{
+    struct NsRunDose *D = r->dose;
+    if (!D)
+        return;
+    if (D->csv_tmp)
+        ns_out_remove_part(D->csv_tmp);
+    free(D->csv_tmp);
+    free(D->pts);
+    free(D->which);
+    for (int w = 0; w < 2; w++) {
+        free(D->dose[w]);
+        for (int q = 0; q < 3; q++)
+            ns_dvh_free(&D->dvh[w][q]);
+    }
+    free(D->disp);
+    free(D);
+    r->dose = NULL;
+}
