@@ -300,5 +300,13 @@ int ns_run_dosimetry_write(NsRun *r, char *err, int err_sz);
 int ns_run_dosimetry_commit(NsRun *r);
 void ns_run_dosimetry_uncommit(NsRun *r);
 void ns_run_dosimetry_free(NsRun *r);
+/* The DVH of region 0 prostate, 1 urethra, 2 rectum, planned (delivered 0) or delivered; NULL
+ * before the run's end or without dosimetry. */
+const struct NsDvh *ns_run_dosimetry_dvh(const NsRun *r, int delivered, int region);
+/* engine/run_dose_chart.c: the contact sheet's DVH chart (im zeroed without dosimetry) and its
+ * table rows (returns how many of max it wrote). */
+struct NsImage;
+int ns_run_dosimetry_chart(const NsRun *r, struct NsImage *im, char *err, int err_sz);
+int ns_run_dosimetry_rows(const NsRun *r, char (*rows)[128], int max);
 
 #endif

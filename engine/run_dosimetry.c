@@ -310,6 +310,15 @@ void ns_run_dosimetry_json(NsJson *j, const NsRun *r)
 /* DIR/dvh.csv: the cumulative DVHs, % of each region's volume receiving at least each dose,
  * from 0 to 3x the prescription in steps of 1% of it. Written as a part file, renamed by
  * ns_run_dosimetry_commit. */
+const NsDvh *ns_run_dosimetry_dvh(const NsRun *r, int delivered, int region)
+{
+    const struct NsRunDose *D = r->dose;
+    int w = delivered ? DELIVERED : PLANNED;
+    if (!D || !D->dose[DELIVERED] || region < 0 || region > 2)
+        return NULL;
+    return &D->dvh[w][region];
+}
+
 int ns_run_dosimetry_write(NsRun *r, char *err, int err_sz)
 {
     struct NsRunDose *D = r->dose;

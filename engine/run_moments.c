@@ -289,6 +289,7 @@ int ns_run_render_end(NsRun *r, const NsRunResults *res, char *err, int err_sz)
         if (r->obst[k].violated)
             snprintf(rows[n++], sizeof rows[0], "obstacle %s entered at t = %.2f s, %.1f mm deep",
                      sp->obstacles[k].name, r->obst[k].first_t, 1e3 * r->obst[k].max_depth);
+    n += ns_run_dosimetry_rows(r, rows + n, ROWS - 3 - n);
     snprintf(rows[n++], sizeof rows[0],
              "score %.1f / 100 (targets %.1f, obstacles -%.0f); insertions %d", res->total,
              res->target_part, res->obstacle_penalty, r->insertions);
@@ -301,5 +302,10 @@ int ns_run_render_end(NsRun *r, const NsRunResults *res, char *err, int err_sz)
     char title[160];
     snprintf(title, sizeof title, "%s: score %.1f / 100, %ld steps, %.2f s", r->sc.name, res->total,
              r->steps, (double)r->steps * sp->dt);
-    return ns_run_render_finish(&r->rr, title, table, n, err, err_sz);
+    NsImage chart;
+    if (ns_run_dosimetry_chart(r, &chart, err, err_sz))
+        return -1;
+    int rc = ns_run_render_finish(&r->rr, title, table, n, &chart, err, err_sz);
+    ns_image_free(&chart);
+    return rc;
 }

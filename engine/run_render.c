@@ -273,9 +273,9 @@ int ns_run_render_moment(NsRunRender *rr, NsSceneInput *in, const char *const *h
     return 0;
 }
 
-/* The sheet: a title, the moments three a row with their captions, the score table. */
+/* The sheet: a title, the moments three a row with their captions, the score table, a chart. */
 static int write_sheet(NsRunRender *rr, const char *title, const char *const *table, int rows,
-                       char *err, int err_sz)
+                       const NsImage *chart, char *err, int err_sz)
 {
     static const uint8_t bg[3] = {24, 27, 34}, fg[3] = {235, 238, 242}, dim[3] = {170, 178, 190};
     NsFont *big = ns_font_open(28, 0, err, err_sz);
@@ -293,6 +293,10 @@ static int write_sheet(NsRunRender *rr, const char *title, const char *const *ta
     int W = 3 * tw + 4 * pad, H = title_h + rows_m * (th + cap_h + pad) + pad + rows * lh + pad;
     int wt = ns_font_measure(big, title) + 2 * pad;
     W = wt > W ? wt : W;
+    if (chart && chart->rgb) {
+        W = chart->w + 2 * pad > W ? chart->w + 2 * pad : W;
+        H += chart->h + pad;
+    }
     for (int i = 0; i < rows; i++) {
         int wr = ns_font_measure(mono, table[i]) + 2 * pad;
         W = wr > W ? wr : W;
@@ -316,6 +320,8 @@ static int write_sheet(NsRunRender *rr, const char *title, const char *const *ta
     int y0 = title_h + rows_m * (th + cap_h + pad) + pad;
     for (int i = 0; i < rows; i++)
         ns_font_draw(mono, &sheet, pad, y0 + i * lh + ns_font_ascent(mono), table[i], fg);
+    if (chart && chart->rgb)
+        ns_image_blit_scaled(&sheet, pad, y0 + rows * lh + pad, chart->w, chart->h, chart);
     /* A fresh file: whatever is at the temporary name (a hard link to another file, say) is
      * unlinked, not written through; a non-regular one was refused at open. */
     ns_out_remove_old(rr->summary_tmp);
@@ -330,10 +336,10 @@ static int write_sheet(NsRunRender *rr, const char *title, const char *const *ta
 }
 
 int ns_run_render_finish(NsRunRender *rr, const char *title, const char *const *table, int rows,
-                         char *err, int err_sz)
+                         const NsImage *chart, char *err, int err_sz)
 {
     double t0 = now_s();
-    if (rr->o.summary && write_sheet(rr, title, table, rows, err, err_sz))
+    if (rr->o.summary && write_sheet(rr, title, table, rows, chart, err, err_sz))
         return -1;
     if (rr->video) {
         NsVideo *v = rr->video;

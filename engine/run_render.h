@@ -58,9 +58,10 @@ int ns_run_render_frame(NsRunRender *rr, NsSceneInput *in, const char *const *hu
  * later moments past the others are dropped, `final` always replaces the last). */
 int ns_run_render_moment(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
                          const char *caption, bool final, char *err, int err_sz);
-/* Writes the contact sheet and closes the video, under their temporary names. */
+/* Writes the contact sheet (chart, when not NULL, below the table) and closes the video, under
+ * their temporary names. */
 int ns_run_render_finish(NsRunRender *rr, const char *title, const char *const *table, int rows,
-                         char *err, int err_sz);
+                         const NsImage *chart, char *err, int err_sz);
 /* Moves the frames folder, the video and the sheet to their names: all or none. */
 int ns_run_render_commit(NsRunRender *rr, char *err, int err_sz);
 /* Removes what ns_run_render_commit put in place (a later output failed). */

@@ -319,6 +319,13 @@ static void report_outcome(NsJson *j, NsRun *r, const NsRunResults *res)
         ns_json_end_object(j);
     }
     ns_json_end_array(j);
+    /* a needle's tip stopped by bone on its way in: in a brachytherapy implant, pubic arch
+     * interference (the trainee re-aims) */
+    int bone = 0;
+    for (int i = 0; i < r->event_n; i++)
+        bone += r->events[i].type == EVENT_BONE_CONTACT;
+    ns_json_key(j, "bone_interferences");
+    ns_json_int(j, bone);
     ns_json_key(j, "warnings");
     ns_json_begin_object(j);
     ns_json_key(j, "nan");

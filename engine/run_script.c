@@ -88,6 +88,17 @@ static int start_body(lua_State *L)
     set_num(L, lua_gettop(L), "base_speed", NS_LIMIT_BASE_SPEED);
     set_num(L, lua_gettop(L), "twist_angle", NS_LIMIT_TWIST_ANGLE);
     lua_rawset(L, -3);
+    lua_pushstring(L, "entry"); /* the scenario's entry: the first needle's (act.needle) */
+    lua_createtable(L, 0, 2);
+    set_vec(L, lua_gettop(L), "point", r->spec.entry_point);
+    set_vec(L, lua_gettop(L), "direction", r->spec.entry_dir);
+    lua_rawset(L, -3);
+    lua_pushstring(L, "template"); /* the scenario's ns.template (act.needle), or nil */
+    lua_rawgeti(L, LUA_REGISTRYINDEX, r->sc.table_ref);
+    lua_pushstring(L, "template");
+    lua_rawget(L, -2);
+    lua_remove(L, -2);
+    lua_rawset(L, -3);
     lua_pushstring(L, "planner"); /* act.steer's and ns.plan's planners (run_steer.c) */
     ns_run_steer_push(L, r);
     lua_rawset(L, -3);

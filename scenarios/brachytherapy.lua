@@ -4,25 +4,9 @@
 -- What it teaches: the tissue the needle crosses on the way in (skin, perineal fat and muscle,
 -- the prostate capsule) and the structures to avoid (urethra, rectum, pubic arch).
 --
--- The anatomy is synthetic, built from textbook dimensions, in a patient frame:
---   x: patient left (+) / right (-); y: anterior (+, towards the pubis) / posterior (-, rectum);
---   z: depth from the perineal skin (z = 0) towards the bladder (+). Metres throughout.
--- Only the block the needles can reach is modelled (7.2 x 9.2 x 9.8 cm), the paper's rule of
--- "model no more than a scene needs"; the paper's mesh of a whole pelvis had 13,375 tets.
---
--- Dimensions (adult male, textbook values):
---   prostate 4 cm wide x 3 cm antero-posterior x 3 cm long, apex ~3.5 cm deep from the perineal
---     skin (the usual transperineal needle path is 5-7 cm long);
---   prostatic urethra through its centre, slightly anterior, continuing into the bladder neck;
---     modelled with its surrounding sphincter tissue as a 5 mm radius tube;
---   bladder base above the prostate base; rectum behind the prostate (wall and lumen in one
---     region, the wall being thinner than the mesh spacing);
---   perineal muscle (urogenital diaphragm / perineal body) between the skin and the apex;
---   pubic arch: the inferior pubic rami meeting at the symphysis, anterior to the prostate,
---     held fixed (bone).
--- The capsule of the prostate (0.5 mm) and the skin (1 mm) are far thinner than an element:
--- as in the paper (§3.3) they are membranes that raise the cutting force where the needle
--- crosses the region's surface (see the materials' `membrane` field), not separate regions.
+-- The anatomy is synthetic, built from textbook dimensions (scripts/needlesim/anatomy.lua says
+-- which), in a patient frame: x patient left (+) / right (-); y anterior (+, towards the pubis) /
+-- posterior (-, rectum); z depth from the perineal skin (z = 0) towards the bladder (+). Metres.
 --
 -- The run (needlesim run scenarios/brachytherapy.lua): two needles, one after the other, through
 -- the template holes at x = +8 and -10 mm, y = -4 mm (either side of the urethra, above the
@@ -35,32 +19,7 @@
 -- obstacles; each one entered costs 25 points.
 local ns = require "needlesim"
 local act = require "needlesim.actions"
-local M = ns.materials
-
-local shape = ns.shape
-
--- The perineal fat carries the skin as a membrane on its surface (1 mm, §3.3): the needle meets
--- the skin's puncture force where it enters. Puncture force: estimate (see materials.lua).
-local perineal_fat = ns.material {
-  base = M.fat,
-  name = "perineal fat",
-  membrane = { thickness = 1e-3, cut_force = 2.0 },
-}
-
--- The modelled block: from the perineal skin (z = 0) to just past the bladder base. Every organ
--- stays at least one lattice cell inside it, so the skin surface meets no organ (docs/mesher.md:
--- interfaces closer than a cell to the outer boundary bend towards it).
-local block = shape.box { center = { 0, -0.002, 0.049 }, size = { 0.072, 0.092, 0.098 } }
-
-local prostate = shape.ellipsoid { center = { 0, 0, 0.050 }, radii = { 0.020, 0.015, 0.015 } }
--- Prostatic urethra with its sphincter (the usual 5 mm planning margin), apex to bladder neck.
-local urethra = shape.capsule { a = { 0, 0.004, 0.026 }, b = { 0, 0.004, 0.076 }, radius = 0.005 }
-local bladder = shape.ellipsoid { center = { 0, 0.006, 0.079 }, radii = { 0.026, 0.022, 0.012 } }
-local rectum = shape.capsule { a = { 0, -0.029, 0.014 }, b = { 0, -0.029, 0.072 }, radius = 0.010 }
-local perineum = shape.box { center = { 0, 0.004, 0.020 }, size = { 0.044, 0.030, 0.010 } }
-local pubic_arch = shape.union(
-  shape.capsule { a = { -0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 },
-  shape.capsule { a = { 0.022, 0.020, 0.024 }, b = { 0, 0.030, 0.044 }, radius = 0.006 })
+local pelvis = require("needlesim.anatomy").pelvis()
 
 -- The template holes (x, y on the perineum) and the planned seed depths from the skin [m] (the
 -- targets; the needle punctures the skin at the hole, docs/remeshing.md "Skin entry").
@@ -121,17 +80,5 @@ return ns.scenario {
     end
     act.wait { time = 0.2 } -- the tissue settles around the seeds
   end,
-  tissue = ns.tissue.shapes {
-    resolution = 8.8e-3,
-    -- Later regions override earlier ones where they overlap.
-    regions = {
-      { name = "fat", shape = block, material = perineal_fat },
-      { name = "perineum", shape = perineum, material = M.muscle },
-      { name = "rectum", shape = rectum, material = M.rectum },
-      { name = "bladder", shape = bladder, material = M.bladder },
-      { name = "prostate", shape = prostate, material = M.prostate },
-      { name = "urethra", shape = urethra, material = M.urethra },
-      { name = "pubic_arch", shape = pubic_arch, material = M.bone, fixed = true },
-    },
-  },
+  tissue = pelvis.tissue,
 }

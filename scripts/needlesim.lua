@@ -937,11 +937,195 @@ function ns.needle(t)
     return new(NEEDLE, n)
 end
 
+-- Brachytherapy template and preloaded needles ---------------------------------------------
+
+local TEMPLATE = make_kind("template", function() return "ns.template" end)
+local TEMPLATE_FIELDS = { "origin", "spacing", "rows", "cols", "labels", "direction" }
+local LABEL_FIELDS = { "cols", "rows" }
+-- A model 6711 seed is 4.5 mm long, the usual spacer 5.5 mm: seed, spacer, seed... puts the
+-- seeds' centres 1 cm apart along the needle.
+local SEED_LENGTH, SPACER_LENGTH = 4.5e-3, 5.5e-3
+local LOAD_SEEDS_MAX = 20
+
+-- The distances of a load's seed centres behind the needle's tip [m], the deepest first; or
+-- nil and what is wrong. A load is a list of "seed" and "spacer" from the tip back, or
+-- {seeds = n, spacing = s}: n seeds s apart centre to centre (default 1 cm).
+local function load_offsets(load)
+    if type(load) ~= "table" or kind_of(load) then
+        return nil, fmt("load must be a list of 'seed' and 'spacer', or {seeds = n, spacing = s} "
+            .. "(got %s)", describe(load))
+    end
+    local out = {}
+    if load.seeds ~= nil then
+        for k in pairs(load) do
+            if k ~= "seeds" and k ~= "spacing" then
+                return nil, fmt("load: unknown field '%s' (known: seeds, spacing)", tostring(k))
+            end
+        end
+        local n, sp = load.seeds, load.spacing or 1e-2
+        if math.type(n) ~= "integer" or n < 1 or n > LOAD_SEEDS_MAX then
+            return nil, fmt("load.seeds must be an integer in [1, %d] (got %s)", LOAD_SEEDS_MAX,
+                describe(n))
+        end
+        if not is_finite(sp) or sp < SEED_LENGTH or sp > 0.05 then
+            return nil, fmt("load.spacing must be a number in [%g, 0.05] [m] (got %s)",
+                SEED_LENGTH, describe(sp))
+        end
+        for i = 1, n do
+            out[i] = SEED_LENGTH / 2 + (i - 1) * sp
+        end
+        return out
+    end
+    local count = 0
+    for _ in pairs(load) do
+        count = count + 1
+    end
+    if count ~= #load or count < 1 or count > 2 * LOAD_SEEDS_MAX then
+        return nil, fmt("load must be a list of 1 to %d 'seed' and 'spacer' (got %s)",
+            2 * LOAD_SEEDS_MAX, describe(load))
+    end
+    local at = 0
+    for i, item in ipairs(load) do
+        if item == "seed" then
+            out[#out + 1] = at + SEED_LENGTH / 2
+            at = at + SEED_LENGTH
+        elseif item == "spacer" then
+            at = at + SPACER_LENGTH
+        else
+            return nil, fmt("load[%d] must be 'seed' or 'spacer' (got %s)", i, describe(item))
+        end
+    end
+    if #out == 0 then
+        return nil, "load carries no seed"
+    end
+    return out
+end
+
+local function label_list(a, labels, key, n, default)
+    if labels == nil or labels[key] == nil then
+        local out = {}
+        for i = 1, n do
+            out[i] = default(i)
+        end
+        return out
+    end
+    local l = labels[key]
+    if type(l) ~= "table" or kind_of(l) or #l ~= n then
+        a:fail("labels.%s must be a list of %d names (got %s)", key, n, describe(l))
+    end
+    local out, seen = {}, {}
+    for i = 1, n do
+        if type(l[i]) ~= "string" or not l[i]:match("^[%w.]+$") or #l[i] > 8 or seen[l[i]] then
+            a:fail("labels.%s[%d] must be a distinct name of 1 to 8 letters, digits or '.' (got %s)",
+                key, i, describe(l[i]))
+        end
+        seen[l[i]] = true
+        out[i] = l[i]
+    end
+    return out
+end
+
+--- ns.template{origin, spacing, rows, cols, labels, direction}: a brachytherapy template, a
+-- grid of cols x rows holes `spacing` apart (default 5 mm) through which needles go in along
+-- `direction` (default {0, 0, 1}, into the patient). `origin` [m] is the first column's first
+-- row, on the skin; columns run across the direction (along +x when it is z), rows along the
+-- third axis (+y). A hole is named by its column's label and its row's, "C4"; the labels
+-- default to "A", "B", ... and "1", "2", ..., and labels = {cols = {...}, rows = {...}} names
+-- them as a clinical template's own markings do. The template holds `holes` (name -> point),
+-- `names` (in column-major order), `direction`, and three functions: entry(hole) ->
+-- {point, direction} for ns.scenario's `entry`; seeds(hole, depth, load) -> the planned seed
+-- centres of a needle loaded with `load` pushed `depth` past the skin (act.needle leaves them
+-- there when the tissue does not move); offsets(load) -> the seeds' distances behind the tip.
+function ns.template(t)
+    local where = where_of(2)
+    local a = args(t, "ns.template", where, TEMPLATE_FIELDS)
+    local origin = a:vec3("origin", ANY, " [m]")
+    local spacing = a:number("spacing", function(x) return x >= 1e-3 and x <= 2e-2 end,
+        "in [1e-3, 2e-2] [m]", 5e-3)
+    local function count(k)
+        return a:number(k, function(x) return x % 1 == 0 and x >= 1 and x <= 26 end,
+            "(an integer in [1, 26])", 13)
+    end
+    local cols, rows = count("cols"), count("rows")
+    local d = a:vec3("direction", ANY, "", { 0, 0, 1 })
+    local len = math.sqrt(d[1] ^ 2 + d[2] ^ 2 + d[3] ^ 2)
+    if len == 0 then
+        a:fail("direction must not be zero")
+    end
+    d = { d[1] / len, d[2] / len, d[3] / len }
+    local labels = a:get("labels")
+    if labels ~= nil then
+        args(labels, "ns.template: labels", where, LABEL_FIELDS)
+    end
+    local clab = label_list(a, labels, "cols", cols, function(i) return string.char(64 + i) end)
+    local rlab = label_list(a, labels, "rows", rows, function(i) return tostring(i) end)
+    -- the axes across the direction: x less its part along d (y if d is along x), then d x u
+    local u = math.abs(d[1]) < 0.9 and { 1, 0, 0 } or { 0, 1, 0 }
+    local ud = u[1] * d[1] + u[2] * d[2] + u[3] * d[3]
+    u = { u[1] - ud * d[1], u[2] - ud * d[2], u[3] - ud * d[3] }
+    local ul = math.sqrt(u[1] ^ 2 + u[2] ^ 2 + u[3] ^ 2)
+    u = { u[1] / ul, u[2] / ul, u[3] / ul }
+    local v = { d[2] * u[3] - d[3] * u[2], d[3] * u[1] - d[1] * u[3], d[1] * u[2] - d[2] * u[1] }
+    local holes, names = {}, {}
+    for c = 1, cols do
+        for r = 1, rows do
+            local name = clab[c] .. rlab[r]
+            if holes[name] then
+                a:fail("two holes are named '%s' (labels.cols and labels.rows run together)",
+                    name)
+            end
+            local p = {}
+            for k = 1, 3 do
+                p[k] = origin[k] + (c - 1) * spacing * u[k] + (r - 1) * spacing * v[k]
+            end
+            holes[name] = p
+            names[#names + 1] = name
+        end
+    end
+    local tpl = { origin = origin, spacing = spacing, cols = cols, rows = rows, direction = d,
+        holes = holes, names = names, offsets = load_offsets, where = where }
+    local function hole(name, level)
+        local p = type(name) == "string" and holes[name] or nil
+        if not p then
+            error(fmt("ns.template: no hole %s (holes %s to %s)", describe(name), names[1],
+                names[#names]), level + 1)
+        end
+        return p
+    end
+    tpl.hole = function(name) return hole(name, 2) end
+    tpl.entry = function(name)
+        local p = hole(name, 2)
+        return { point = { p[1], p[2], p[3] }, direction = { d[1], d[2], d[3] } }
+    end
+    tpl.seeds = function(name, depth, load)
+        local p = hole(name, 2)
+        if not is_finite(depth) or depth <= 0 then
+            error(fmt("ns.template: seeds: depth must be a number > 0 [m] (got %s)",
+                describe(depth)), 2)
+        end
+        local offs, why = load_offsets(load)
+        if not offs then
+            error("ns.template: seeds: " .. why, 2)
+        end
+        local out = {}
+        for i, o in ipairs(offs) do
+            local z = depth - o
+            if z <= 0 then
+                error(fmt("ns.template: seeds: the load's seed %d is %.1f mm behind the tip, past "
+                    .. "the skin at depth %.1f mm", i, 1e3 * o, 1e3 * depth), 2)
+            end
+            out[i] = { p[1] + z * d[1], p[2] + z * d[2], p[3] + z * d[3] }
+        end
+        return out
+    end
+    return new(TEMPLATE, tpl)
+end
+
 -- Scenario ---------------------------------------------------------------------------------
 
 local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "duration", "needle",
     "entry", "targets", "obstacles", "markers", "seeds", "camera", "script", "on_tick",
-    "accuracy", "solver", "live", "dosimetry" }
+    "accuracy", "solver", "live", "dosimetry", "template" }
 -- Accepted now and checked by the stages that use them (later versions).
 local RESERVED = {}
 
@@ -1306,6 +1490,10 @@ function ns.scenario(t)
     sc.camera = camera_of(t.camera, where, sc.dt or 0.01)
     sc.live = live_of(t.live, where)
     sc.dosimetry = dosimetry_of(t.dosimetry, t, where)
+    if t.template ~= nil and kind_of(t.template) ~= "template" then
+        a:fail("template must be ns.template{...} (got %s)", describe(t.template))
+    end
+    sc.template = t.template
     for _, k in ipairs(RESERVED) do
         sc[k] = t[k]
     end

@@ -189,7 +189,7 @@ expect_error "check: --mesh-out with unknown extension, exit 2" 2 "use .vtu or .
 
 # ---- the shipped scenarios -----------------------------------------------------------------
 
-for sc in brachytherapy two_cylinders phantom_single_bend phantom_double_bend tutorial; do
+for sc in brachytherapy brachytherapy_implant two_cylinders phantom_single_bend phantom_double_bend tutorial; do
     run check "scenarios/$sc.lua" --json
     if [ "$RC" != 0 ]; then
         fail "check $sc --json" "exit $RC"

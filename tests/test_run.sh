@@ -131,7 +131,8 @@ if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "--record then --replay: same state
 fi
 
 # Every other shipped scenario runs and writes a report whose fields are all finite, its mesh's
-# worst dihedral angle over every step at least 5 deg.
+# worst dihedral angle over every step at least 5 deg; and a template's preloaded needles
+# (act.needle) leave their seeds at the plan's places.
 if [ "$PART" = scenarios ]; then
     for sc in tutorial two_cylinders phantom_single_bend phantom_double_bend steer_around_vessel; do
         "$BIN" run "$SRC/scenarios/$sc.lua" --no-render -o "$TMP/$sc" --quiet >/dev/null 2>"$TMP/err_$sc"
@@ -152,6 +153,47 @@ PY
             fail "$sc" "exit $rc: $(head -1 "$TMP/err_$sc") $(tail -1 "$TMP/py_$sc" 2>/dev/null)"
         fi
     done
+    # Issue 38: a template and preloaded needles (act.needle): each needle through its hole,
+    # its seeds left near the template's planned places; the log replays to the same state.
+    TS="$SRC/tests/data/template_small.lua"
+    "$BIN" run "$TS" --no-render -o "$TMP/ts" --record "$TMP/ts.csv" --quiet >/dev/null 2>"$TMP/err_ts"
+    rc=$?
+    python3 - "$TMP/ts/report.json" <<'PY' >"$TMP/py_ts" 2>&1
+import json, sys
+r = json.load(open(sys.argv[1]))
+assert r["script_finished"] and r["score"]["insertions"] == 2, r["score"]
+assert len(r["seeds"]) == 4 and all(t["hit"] for t in r["targets"]), r["targets"]
+ds = r["dosimetry"]
+assert ds["planned"]["seeds"] == ds["delivered"]["seeds"] == 4, ds
+assert max(ds["seed_displacement_mm"]["each"]) < 2.0, ds["seed_displacement_mm"]
+assert r["bone_interferences"] == 0
+print("4 seeds, %.2f mm from the plan at most" % ds["seed_displacement_mm"]["max"])
+PY
+    prc=$?
+    "$BIN" run "$TS" --no-render -o "$TMP/ts2" --replay "$TMP/ts.csv" --quiet >/dev/null 2>"$TMP/err_ts2"
+    h1=$(grep '"state_hash"' "$TMP/ts/report.json" 2>/dev/null)
+    h2=$(grep '"state_hash"' "$TMP/ts2/report.json" 2>/dev/null)
+    if [ $rc = 0 ] && [ $prc = 0 ] && [ -n "$h1" ] && [ "$h1" = "$h2" ]; then
+        pass "act.needle through a template, replayed ($(cat "$TMP/py_ts"))"
+    else
+        fail "act.needle" "exit $rc: $(head -1 "$TMP/err_ts") $(tail -1 "$TMP/py_ts") $h1 / $h2"
+    fi
+    bad_needle() { # name, sed expression, expected message
+        sed "$2" "$TS" >"$TMP/$1.lua"
+        "$BIN" run "$TMP/$1.lua" --no-render -o "$TMP/o_$1" --quiet >/dev/null 2>"$TMP/err_$1"
+        rc=$?
+        if [ $rc = 1 ] && grep -qF -- "$3" "$TMP/err_$1" && [ ! -e "$TMP/o_$1/report.json" ]; then
+            pass "$1: exit 1, $(head -c 160 "$TMP/err_$1")"
+        else
+            fail "$1" "exit $rc: $(head -1 "$TMP/err_$1")"
+        fi
+    }
+    bad_needle needle_hole 's/hole = "c2", depth/hole = "d9", depth/' \
+        "needle_hole.lua:50: act.needle: 'hole' must name a hole of the template (got d9; holes a1 to c2)"
+    bad_needle needle_load 's/load = load, speed/load = { "seed", "pebble" }, speed/' \
+        "needle_load.lua:50: act.needle: load[2] must be 'seed' or 'spacer' (got 'pebble')"
+    bad_needle needle_shallow 's/depth = 0.02, load = load, speed/depth = 0.01, load = load, speed/' \
+        "needle_shallow.lua:50: act.needle: the load's last seed is 12.2 mm behind the tip"
     echo "$PASSED passed, $FAILED failed"
     [ "$FAILED" = 0 ]
     exit

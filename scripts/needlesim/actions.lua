@@ -17,6 +17,8 @@ local act = {}
 
 local sim -- the engine's view of the run, bound before the script starts (act._bind)
 local co -- the script's coroutine
+local fresh = true -- the needle at the entry has not been pushed in yet (act.needle)
+local entry -- the current needle's entry {point, direction}: the scenario's, then next_needle's
 
 local fmt = string.format
 
@@ -172,6 +174,7 @@ function act.insert(t)
     local spin = number(t, "insert", "spin", spin_ok,
         fmt("in [-%g, %g] [rad/s]", sim.limits.twist_rate, sim.limits.twist_rate), 0)
     local watch = stall_watch("act.insert: the needle does not advance", 1, sim.depth + togo())
+    fresh = false
     -- A tip that meets bone (a fixed region) stops there: the insertion ends early and the
     -- action returns false (sim.bone_contact; the report's events say when and where).
     while togo() > 0 do
@@ -358,6 +361,8 @@ function act.next_needle(t)
     stop()
     sim.control.next_needle = { point = p, direction = d, bevel_toward = b }
     tick()
+    fresh = true
+    entry = { point = p, direction = d }
 end
 
 --- act.drop_seed{}: release a seed at the needle tip (brachytherapy). It stays in the tissue
@@ -368,6 +373,61 @@ function act.drop_seed(t)
     fields(t == nil and {} or t, "drop_seed", {})
     sim.control.drop_seed = true
     tick()
+end
+
+--- act.needle{hole, depth, load, speed, spin}: a preloaded needle through the template hole
+-- named `hole` (the scenario's `template = ns.template{...}`). The needle before it comes out
+-- first (unless it is the scenario's first needle, waiting unused at this very hole); the new
+-- one is pushed in at `speed` [m/s] (default 0.02), turning at `spin` [rad/s] (default 0),
+-- until its tip is `depth` [m] past the skin; then it is withdrawn with the stylet held, and
+-- each seed of `load` ({"seed", "spacer", ...} from the tip back, or {seeds = n, spacing = s})
+-- is released where the tip passes the place the seed held in the needle (the template's
+-- seeds(hole, depth, load) are those places in the undeformed anatomy: the plan). Returns true,
+-- or false when the tip met bone on the way in (pubic arch interference, counted in the
+-- report): that needle comes out with its seeds and the script re-aims (another hole).
+function act.needle(t)
+    running()
+    fields(t, "needle", { "hole", "depth", "load", "speed", "spin" })
+    local tpl = sim.template
+    if tpl == nil then
+        error("act.needle: the scenario has no template (template = ns.template{...})", 2)
+    end
+    if type(t.hole) ~= "string" or tpl.holes[t.hole] == nil then
+        error(fmt("act.needle: 'hole' must name a hole of the template (got %s; holes %s to %s)",
+            tostring(t.hole), tpl.names[1], tpl.names[#tpl.names]), 2)
+    end
+    local depth = number(t, "needle", "depth", GT0, "> 0 [m]")
+    local offs, why = tpl.offsets(t.load)
+    if not offs then
+        error("act.needle: " .. why, 2)
+    end
+    if offs[#offs] >= depth then
+        error(fmt("act.needle: the load's last seed is %.1f mm behind the tip, past the skin at "
+            .. "depth %.1f mm", 1e3 * offs[#offs], 1e3 * depth), 2)
+    end
+    local speed = number(t, "needle", "speed", speed_ok, speed_what(), 0.02)
+    local spin = number(t, "needle", "spin", spin_ok,
+        fmt("in [-%g, %g] [rad/s]", sim.limits.twist_rate, sim.limits.twist_rate), 0)
+    local p, d = tpl.holes[t.hole], tpl.direction
+    local e, ed = entry.point, entry.direction
+    local here = math.abs(e[1] - p[1]) + math.abs(e[2] - p[2]) + math.abs(e[3] - p[3]) < 1e-9
+        and math.abs(ed[1] - d[1]) + math.abs(ed[2] - d[2]) + math.abs(ed[3] - d[3]) < 1e-9
+    if not (fresh and here) then
+        if not sim.exited then
+            act.retract { speed = speed }
+        end
+        act.next_needle { point = p, direction = d }
+    end
+    if not act.insert { speed = speed, depth = depth, spin = spin } then
+        act.retract { speed = speed }
+        return false
+    end
+    for _, off in ipairs(offs) do
+        act.retract { speed = speed, depth = depth - off }
+        act.drop_seed {}
+    end
+    act.retract { speed = speed }
+    return true
 end
 
 -- The target named `to` (a string naming one of sim.targets), else an error at the caller's
@@ -600,6 +660,8 @@ end
 -- a script), which the engine resumes once per time step before the solver steps.
 function act._bind(s, script)
     sim = s
+    fresh = true
+    entry = s.entry
     co = script and coroutine.create(script) or nil
     return co
 end
