@@ -10,6 +10,7 @@
  * normal); its turning with the tissue is not followed. */
 #include <errno.h>
 #include <math.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -259,6 +260,82 @@ static void figures_json(NsJson *j, const char *key, const struct NsRunDose *D, 
     ns_json_end_object(j);
 }
 
+/* The guideline criteria (docs/brachytherapy.md, "Dose score"): each met scores 1, the total is
+ * their mean x 100. Limits in % of the prescription, % of the region, or cc. */
+typedef struct Criterion {
+    const char *name, *unit;
+    int region;   /* 0 prostate, 1 urethra, 2 rectum */
+    int kind;     /* 0: D at % of volume, 1: D at volume (cc), 2: V at % of Rx (%), 3: (cc) */
+    double at;    /* the % of volume, the volume [cc] or the dose [% of Rx] read */
+    double limit; /* in `unit` */
+    int at_least; /* 1: value >= limit, 0: value < limit (or <= for V150) */
+} Criterion;
+
+static const Criterion criteria[] = {
+    {"prostate_d90", "pct_rx", 0, 0, 90, 100, 1}, {"prostate_v100", "pct", 0, 2, 100, 95, 1},
+    {"prostate_v150", "pct", 0, 2, 150, 60, 0},   {"urethra_d10", "pct_rx", 1, 0, 10, 150, 0},
+    {"rectum_d2cc", "pct_rx", 2, 1, 2, 100, 0},   {"rectum_v100", "cc", 2, 3, 100, 1, 0},
+};
+#define N_CRITERIA ((int)(sizeof criteria / sizeof criteria[0]))
+
+static double criterion_value(const Criterion *c, const NsDvh *d, double rx)
+{
+    switch (c->kind) {
+    case 0:
+        return 100.0 * ns_dvh_d_pct(d, c->at) / rx;
+    case 1:
+        return 100.0 * ns_dvh_d_vol(d, 1e-6 * c->at) / rx;
+    case 2:
+        return ns_dvh_v_pct(d, 1e-2 * c->at * rx);
+    default:
+        return 1e6 * ns_dvh_v_vol(d, 1e-2 * c->at * rx);
+    }
+}
+
+static bool criterion_met(const Criterion *c, double v)
+{
+    return c->at_least ? v >= c->limit : c->kind == 2 ? v <= c->limit : v < c->limit;
+}
+
+static void score_json(NsJson *j, const struct NsRunDose *D, double rx)
+{
+    ns_json_key(j, "score");
+    ns_json_begin_object(j);
+    ns_json_key(j, "formula");
+    ns_json_string(j, "needlesim-dose-score/1");
+    int met[2] = {0, 0};
+    ns_json_key(j, "criteria");
+    ns_json_begin_array(j);
+    for (int k = 0; k < N_CRITERIA; k++) {
+        const Criterion *c = &criteria[k];
+        ns_json_begin_object(j);
+        ns_json_key(j, "name");
+        ns_json_string(j, c->name);
+        ns_json_key(j, "unit");
+        ns_json_string(j, c->unit);
+        ns_json_key(j, "limit");
+        ns_json_number(j, c->limit);
+        ns_json_key(j, "at_least");
+        ns_json_bool(j, c->at_least);
+        for (int w = 0; w < 2; w++) {
+            double v = criterion_value(c, &D->dvh[w][c->region], rx);
+            bool ok = criterion_met(c, v);
+            met[w] += ok;
+            ns_json_key(j, w == PLANNED ? "planned" : "delivered");
+            ns_json_number(j, v);
+            ns_json_key(j, w == PLANNED ? "planned_met" : "delivered_met");
+            ns_json_bool(j, ok);
+        }
+        ns_json_end_object(j);
+    }
+    ns_json_end_array(j);
+    ns_json_key(j, "planned");
+    ns_json_number(j, 100.0 * met[PLANNED] / N_CRITERIA);
+    ns_json_key(j, "delivered");
+    ns_json_number(j, 100.0 * met[DELIVERED] / N_CRITERIA);
+    ns_json_end_object(j);
+}
+
 void ns_run_dosimetry_json(NsJson *j, const NsRun *r)
 {
     const struct NsRunDose *D = r->dose;
@@ -302,6 +379,7 @@ void ns_run_dosimetry_json(NsJson *j, const NsRun *r)
         ns_json_number(j, 1e3 * D->disp[k]);
     ns_json_end_array(j);
     ns_json_end_object(j);
+    score_json(j, D, ds->prescription);
     ns_json_key(j, "dose_ms");
     ns_json_number(j, D->ms);
     ns_json_end_object(j);

@@ -113,6 +113,21 @@ assert all(all(a >= b for a, b in zip(c, c[1:])) for c in cols[1:]), "a DVH rise
 at = rows[1 + 100]
 assert abs(float(at[1]) - ds["planned"]["prostate_v100_pct"]) < 1e-4, (at, ds["planned"])
 assert abs(float(at[2]) - ds["delivered"]["prostate_v100_pct"]) < 1e-4, (at, ds["delivered"])
+# needlesim-dose-score/1: each criterion read off the figures above, met against its limit
+sc = ds["score"]
+assert sc["formula"] == "needlesim-dose-score/1" and len(sc["criteria"]) == 6, sc
+for k in ("planned", "delivered"):
+    c = {x["name"]: x for x in sc["criteria"]}
+    f = ds[k]
+    assert abs(c["prostate_d90"][k] - f["prostate_d90_pct"]) < 1e-9, (c["prostate_d90"], f)
+    assert abs(c["prostate_v100"][k] - f["prostate_v100_pct"]) < 1e-9
+    assert abs(c["urethra_d10"][k] - 100 * f["urethra_d10_gy"] / 145) < 1e-9
+    assert abs(c["rectum_d2cc"][k] - 100 * f["rectum_d2cc_gy"] / 145) < 1e-9
+    assert abs(c["rectum_v100"][k] - f["rectum_v100_cc"]) < 1e-9
+    met = [x[k] >= x["limit"] if x["at_least"] else x[k] <= x["limit"] if x["name"] == "prostate_v150"
+           else x[k] < x["limit"] for x in sc["criteria"]]
+    assert met == [x[k + "_met"] for x in sc["criteria"]], (k, met)
+    assert abs(sc[k] - 100 * sum(met) / 6) < 1e-9, (k, sc[k])
 print("prostate D90 planned %.1f Gy, delivered %.1f Gy; seeds moved %.1f mm on average; %.0f ms"
       % (ds["planned"]["prostate_d90_gy"], ds["delivered"]["prostate_d90_gy"],
          ds["seed_displacement_mm"]["mean"], ds["dose_ms"]))
