@@ -22,6 +22,7 @@
 #include "out_files.h"
 #include "remesh.h"
 #include "run.h"
+#include "scene.h"
 
 enum { PLANNED, DELIVERED };
 static const char *const region_key[3] = {"prostate", "urethra", "rectum"};
@@ -388,6 +389,37 @@ void ns_run_dosimetry_json(NsJson *j, const NsRun *r)
 /* DIR/dvh.csv: the cumulative DVHs, % of each region's volume receiving at least each dose,
  * from 0 to 3x the prescription in steps of 1% of it. Written as a part file, renamed by
  * ns_run_dosimetry_commit. */
+/* The scene's dose callback: the seeds at their world positions now, the dosimetry's source,
+ * strength and axis. */
+static int scene_dose(void *ctx, const double *seed_x, int n_seeds, const double *pts, long n,
+                      double *out)
+{
+    const NsRun *r = ctx;
+    const struct NsRunDose *D = r->dose;
+    NsDoseSeed *seeds = malloc((size_t)(n_seeds > 0 ? n_seeds : 1) * sizeof *seeds);
+    if (!seeds)
+        return -1;
+    for (int k = 0; k < n_seeds; k++) {
+        memcpy(seeds[k].pos, seed_x + 3 * k, sizeof seeds[k].pos);
+        memcpy(seeds[k].axis, D->axis, sizeof D->axis);
+        seeds[k].sk = r->spec.dosimetry.strength;
+    }
+    int rc = ns_dose_points(&D->src, seeds, n_seeds, pts, n, r->opt.threads, out, NULL, 0);
+    free(seeds);
+    return rc;
+}
+
+void ns_run_dosimetry_isodose(NsRun *r, NsSceneInput *in)
+{
+    if (!r->dose)
+        return;
+    in->dose_points = scene_dose;
+    in->dose_ctx = r;
+    in->iso_levels[0] = r->spec.dosimetry.prescription;
+    in->iso_levels[1] = 1.5 * r->spec.dosimetry.prescription;
+    in->iso_count = 2;
+}
+
 const NsDvh *ns_run_dosimetry_dvh(const NsRun *r, int delivered, int region)
 {
     const struct NsRunDose *D = r->dose;

@@ -183,6 +183,7 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
         in.has_cut_normal = sp->camera.has_cut_normal;
         memcpy(in.cut_normal, sp->camera.cut_normal, sizeof in.cut_normal);
         in.tet_edges = sp->camera.tet_edges;
+        ns_run_dosimetry_isodose(r, &in); /* the 100 % and 150 % lines, with dosimetry */
     }
     char l0[160], l1[160], l2[160], l3[160];
     snprintf(l0, sizeof l0, "%s%s", r->sc.name, r->opt.replay ? " (replay)" : "");

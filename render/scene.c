@@ -5,6 +5,8 @@
  * seeds and markers. No OpenGL here. */
 #include "scene.h"
 
+#include "contour.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -18,6 +20,7 @@ const uint8_t ns_scene_needle_rgb[5][3] = {
     {235, 40, 40},   /* cutting (the tip) */
 };
 const uint8_t ns_scene_hit_rgb[3] = {40, 200, 70}, ns_scene_miss_rgb[3] = {225, 35, 45};
+const uint8_t ns_scene_iso_rgb[2][3] = {{255, 230, 40}, {255, 110, 20}};
 
 void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3])
 {
@@ -465,6 +468,88 @@ static int build_solids(const NsSceneInput *in, NsScene *s)
     return 0;
 }
 
+/* ---- isodose lines on the cut face ---- */
+
+#define ISO_CELLS 120 /* grid cells across the larger side of the framed box */
+
+typedef struct IsoCtx {
+    NsScene *s;
+    double o[3], u[3], w[3], n2[3], h, px;
+    const uint8_t *rgb;
+} IsoCtx;
+
+/* One segment in grid units, drawn three times a pixel apart across itself (GL lines are one
+ * pixel wide). */
+static int iso_emit(void *ctx, const double a[2], const double b[2])
+{
+    IsoCtx *c = ctx;
+    double pa[3], pb[3], d[3], across[3];
+    for (int i = 0; i < 3; i++) {
+        pa[i] = c->o[i] + a[0] * c->h * c->u[i] + a[1] * c->h * c->w[i];
+        pb[i] = c->o[i] + b[0] * c->h * c->u[i] + b[1] * c->h * c->w[i];
+        d[i] = pb[i] - pa[i];
+    }
+    cross(c->n2, d, across);
+    if (normalize(across) == 0.0)
+        return 0;
+    for (int k = -1; k <= 1; k++) {
+        double qa[3], qb[3];
+        for (int i = 0; i < 3; i++) {
+            qa[i] = pa[i] + k * 0.7 * c->px * across[i];
+            qb[i] = pb[i] + k * 0.7 * c->px * across[i];
+        }
+        if (push(&c->s->edges, qa, NULL, c->rgb, 255) || push(&c->s->edges, qb, NULL, c->rgb, 255))
+            return -1;
+    }
+    return 0;
+}
+
+/* The dose on a grid over the cut plane (the part of it the framed box covers) and its level
+ * lines. A failed dose evaluation draws no lines; only memory is an error. */
+static int build_isodose(const NsSceneInput *in, NsScene *s)
+{
+    if (!in->dose_points || in->seeds <= 0 || in->iso_count <= 0)
+        return 0;
+    IsoCtx c = {.s = s, .px = in->px_size};
+    memcpy(c.n2, s->plane, sizeof c.n2);
+    any_normal(c.n2, c.u);
+    cross(c.n2, c.u, c.w);
+    double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY}, p0[3];
+    for (int i = 0; i < 3; i++)
+        p0[i] = -s->plane[3] * c.n2[i];
+    for (int k = 0; k < 8; k++) {
+        double q[3] = {in->bounds[k & 1 ? 3 : 0], in->bounds[k & 2 ? 4 : 1],
+                       in->bounds[k & 4 ? 5 : 2]};
+        double r[3] = {q[0] - p0[0], q[1] - p0[1], q[2] - p0[2]};
+        double a = dot(r, c.u), b = dot(r, c.w);
+        lo[0] = fmin(lo[0], a);
+        hi[0] = fmax(hi[0], a);
+        lo[1] = fmin(lo[1], b);
+        hi[1] = fmax(hi[1], b);
+    }
+    c.h = fmax(fmax(hi[0] - lo[0], hi[1] - lo[1]) / ISO_CELLS, 0.5e-3);
+    int nu = (int)ceil((hi[0] - lo[0]) / c.h) + 1, nv = (int)ceil((hi[1] - lo[1]) / c.h) + 1;
+    if (!(nu >= 2 && nv >= 2 && nu <= 4 * ISO_CELLS && nv <= 4 * ISO_CELLS))
+        return 0;
+    for (int i = 0; i < 3; i++)
+        c.o[i] = p0[i] + lo[0] * c.u[i] + lo[1] * c.w[i];
+    long n = (long)nu * nv;
+    double *pts = malloc((size_t)n * 3 * sizeof *pts), *f = malloc((size_t)n * sizeof *f);
+    int rc = pts && f ? 0 : -1;
+    for (int j = 0; rc == 0 && j < nv; j++)
+        for (int i = 0; i < nu; i++)
+            for (int d = 0; d < 3; d++)
+                pts[3 * ((long)j * nu + i) + d] = c.o[d] + i * c.h * c.u[d] + j * c.h * c.w[d];
+    if (rc == 0 && in->dose_points(in->dose_ctx, in->seed_x, in->seeds, pts, n, f) == 0)
+        for (int k = 0; rc == 0 && k < in->iso_count && k < 2; k++) {
+            c.rgb = ns_scene_iso_rgb[k];
+            rc = ns_contour(f, nu, nv, in->iso_levels[k], iso_emit, &c);
+        }
+    free(pts);
+    free(f);
+    return rc;
+}
+
 int ns_scene_build(const NsSceneInput *in, NsView v, double aspect, NsScene *s)
 {
     s->cap.n = s->edges.n = s->solid.n = s->glass.n = 0;
@@ -495,7 +580,7 @@ int ns_scene_build(const NsSceneInput *in, NsView v, double aspect, NsScene *s)
             nc[i] = -nc[i];
     memcpy(s->plane, nc, sizeof nc);
     s->plane[3] = -dot(nc, p0);
-    if (build_cut(in, s) || build_glass(in, s) || build_solids(in, s))
+    if (build_cut(in, s) || build_isodose(in, s) || build_glass(in, s) || build_solids(in, s))
         return -1;
     return 0;
 }

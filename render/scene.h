@@ -43,6 +43,7 @@ typedef struct NsScene {
 /* The friction state colours (needle nodes) and the target colours, for tests and legends. */
 extern const uint8_t ns_scene_needle_rgb[5][3]; /* free, sticking, sliding back, sliding, cutting */
 extern const uint8_t ns_scene_hit_rgb[3], ns_scene_miss_rgb[3];
+extern const uint8_t ns_scene_iso_rgb[2][3]; /* the isodose levels' colours, in order */
 /* The colour of tissue region k on the cut face. */
 void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3]);
 
@@ -81,6 +82,14 @@ typedef struct NsSceneInput {
     bool has_cut_normal;      /* the scenario's cut-plane normal instead of the default */
     double cut_normal[3];
     bool tet_edges; /* draw the tets' edges on the cut face */
+    /* isodose lines on the cut face (docs/brachytherapy.md): dose_points fills out[k] with the
+     * dose [Gy] at pts[3k..3k+2] from seeds at seed_x (returns 0, else no lines); levels [Gy]
+     * drawn with the colours of ns_scene_iso_rgb. NULL: none. */
+    int (*dose_points)(void *ctx, const double *seed_x, int seeds, const double *pts, long n,
+                       double *out);
+    void *dose_ctx;
+    double iso_levels[2];
+    int iso_count;
     double px_size; /* the world size of one pixel at the scene's centre, for minimum sizes */
 } NsSceneInput;
 

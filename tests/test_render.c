@@ -111,6 +111,67 @@ static int scene_cut_in_plane(void)
     return 0;
 }
 
+/* An isotropic made-up dose from the one seed, K / |p - seed|^2: its level line K / R^2 on the
+ * cut face is the circle of radius R round the seed's trace on the plane. */
+static int inverse_square(void *ctx, const double *seed_x, int seeds, const double *pts, long n,
+                          double *out)
+{
+    (void)ctx;
+    for (long i = 0; i < n; i++) {
+        double d2 = 0.0;
+        for (int c = 0; c < 3; c++)
+            d2 += (pts[3 * i + c] - seed_x[c]) * (pts[3 * i + c] - seed_x[c]);
+        out[i] = seeds > 0 ? 1.0 / fmax(d2, 1e-12) : 0.0;
+    }
+    return 0;
+}
+
+/* The isodose lines lie in the cut plane, in their level's colour, on the level's circle
+ * within a grid cell (the grid: 120 cells across the 40 mm box, 0.33 mm), all round it. */
+static int isodose_lines_on_their_level(void)
+{
+    Block b;
+    ENSURE(block_init(&b) == 0);
+    double seed[3] = {0.015, 0.0, 0.0};
+    b.in.seed_x = seed;
+    b.in.seeds = 1;
+    b.in.dose_points = inverse_square;
+    b.in.iso_levels[0] = 1.0 / (0.006 * 0.006); /* R = 6 mm */
+    b.in.iso_levels[1] = 1.0 / (0.003 * 0.003); /* R = 3 mm */
+    b.in.iso_count = 2;
+    b.in.px_size = 1e-5;
+    NsScene s;
+    memset(&s, 0, sizeof s);
+    ENSURE(ns_scene_build(&b.in, NS_VIEW_SIDE, 16.0 / 9.0, &s) == 0);
+    int count[2] = {0, 0}, quadrant[2][4] = {{0}};
+    for (int k = 0; k < s.edges.n; k++) {
+        const NsVertex *v = &s.edges.v[k];
+        int lvl = -1;
+        for (int q = 0; q < 2; q++)
+            if (memcmp(v->rgba, ns_scene_iso_rgb[q], 3) == 0)
+                lvl = q;
+        ENSURE(lvl >= 0); /* tet edges are off: every line is an isodose */
+        double d[3] = {v->p[0] - seed[0], v->p[1] - seed[1], v->p[2] - seed[2]};
+        ENSURE_SMALL(
+            s.plane[0] * v->p[0] + s.plane[1] * v->p[1] + s.plane[2] * v->p[2] + s.plane[3], 1e-6);
+        double R = lvl == 0 ? 0.006 : 0.003, r = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        ENSURE_SMALL(r - R, 0.34e-3);
+        count[lvl]++;
+        quadrant[lvl][(d[0] > 0) + 2 * (d[1] + d[2] > 0)]++;
+    }
+    for (int q = 0; q < 2; q++) {
+        ENSURE(count[q] > 20);
+        for (int k = 0; k < 4; k++)
+            ENSURE(quadrant[q][k] > 0); /* the whole circle, not an arc */
+    }
+    b.in.seeds = 0; /* no seed: no lines */
+    ENSURE(ns_scene_build(&b.in, NS_VIEW_SIDE, 16.0 / 9.0, &s) == 0);
+    ENSURE(s.edges.n == 0);
+    ns_scene_free(&s);
+    ns_mesh_free(&b.mesh);
+    return 0;
+}
+
 static int render_block(Block *b, NsFrame *f, NsImage *im, bool hud)
 {
     char err[256];
@@ -212,4 +273,5 @@ static int pixels_show_the_scene(void)
 }
 
 NS_TEST_MAIN({"scene_cut_in_plane", scene_cut_in_plane},
+             {"isodose_lines_on_their_level", isodose_lines_on_their_level},
              {"pixels_show_the_scene", pixels_show_the_scene})
