@@ -2,8 +2,8 @@
 # act.steer, ns.plan and `needlesim bench --planning` end to end (docs/planning.md): a steered
 # two_cylinders run's report.json has the `steering` object's keys; ns.plan returns a plan from
 # a script; bad act.steer / ns.plan fields fail with one line naming the script's file:line;
-# `bench --planning --layouts 3 --json` has the contract's keys (not the bars: 3 layouts are too
-# few to measure them; ~1 min).
+# `bench --planning --layouts 1 --json` has the contract's keys (not the bars: one layout is too
+# few to measure them; the bars are the benchmark's, docs/planning.md).
 #
 # usage: tests/test_steer_run.sh NEEDLESIM_BINARY SOURCE_ROOT
 set -u
