@@ -42,6 +42,70 @@ struct NsRunDose {
     char *csv_tmp; /* DIR/.dvh.csv.part */
 };
 
+/* Labels the voxels (n[0] x n[1] x n[2] of side h from lo, x fastest) that lie in a tet of
+ * region q of the three with q, tet by tet over each tet's bounding box of voxels (no point
+ * location: a walk from voxel to voxel falls back to a search of every tet for each centre just
+ * outside the tissue's warped surface). A centre on a face shared by two tets takes the first
+ * tet's region; lab holds -1 elsewhere. */
+static void label_voxels(const NsMesh *m, const int region[3], const double lo[3], double h,
+                         const int n[3], signed char *lab)
+{
+    for (int t = 0; t < m->tet_slots; t++) {
+        if (!ns_mesh_tet_alive(m, t))
+            continue;
+        int q = -1;
+        for (int k = 0; k < 3; k++)
+            if (m->tet_region[t] == region[k])
+                q = k;
+        if (q < 0)
+            continue;
+        const int *tn = m->tet_node + 4 * t;
+        const double *x0 = m->u + 3 * tn[0];
+        double e[3][3], inv[3][3], blo[3] = {INFINITY, INFINITY, INFINITY}, bhi[3];
+        for (int c = 0; c < 3; c++)
+            bhi[c] = -INFINITY;
+        for (int k = 0; k < 4; k++)
+            for (int c = 0; c < 3; c++) {
+                double v = m->u[3 * tn[k] + c];
+                blo[c] = fmin(blo[c], v);
+                bhi[c] = fmax(bhi[c], v);
+                if (k > 0)
+                    e[c][k - 1] = v - x0[c]; /* columns: the edges from node 0 */
+            }
+        double det = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) -
+                     e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0]) +
+                     e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);
+        if (!(fabs(det) > 0.0))
+            continue;
+        for (int a = 0; a < 3; a++) /* the inverse by cofactors */
+            for (int b = 0; b < 3; b++) {
+                int a1 = (a + 1) % 3, a2 = (a + 2) % 3, b1 = (b + 1) % 3, b2 = (b + 2) % 3;
+                inv[b][a] = (e[a1][b1] * e[a2][b2] - e[a1][b2] * e[a2][b1]) / det;
+            }
+        int i0[3], i1[3];
+        for (int c = 0; c < 3; c++) { /* centres lo + (i + 1/2) h inside [blo, bhi] */
+            i0[c] = (int)fmax(0.0, ceil((blo[c] - lo[c]) / h - 0.5));
+            i1[c] = (int)fmin(n[c] - 1.0, floor((bhi[c] - lo[c]) / h - 0.5));
+        }
+        for (int k = i0[2]; k <= i1[2]; k++)
+            for (int j = i0[1]; j <= i1[1]; j++)
+                for (int i = i0[0]; i <= i1[0]; i++) {
+                    long v = ((long)k * n[1] + j) * n[0] + i;
+                    if (lab[v] >= 0)
+                        continue;
+                    double d[3] = {lo[0] + (i + 0.5) * h - x0[0], lo[1] + (j + 0.5) * h - x0[1],
+                                   lo[2] + (k + 0.5) * h - x0[2]};
+                    double b[3], sum = 0.0;
+                    for (int a = 0; a < 3; a++) {
+                        b[a] = inv[a][0] * d[0] + inv[a][1] * d[1] + inv[a][2] * d[2];
+                        sum += b[a];
+                    }
+                    if (b[0] >= -1e-12 && b[1] >= -1e-12 && b[2] >= -1e-12 && sum <= 1.0 + 1e-12)
+                        lab[v] = (signed char)q;
+                }
+    }
+}
+
 /* The voxel centres of the three regions in the mesh as built. */
 static int voxelize(NsRun *r, struct NsRunDose *D, char *err, int err_sz)
 {
@@ -79,44 +143,38 @@ static int voxelize(NsRun *r, struct NsRunDose *D, char *err, int err_sz)
                    r->sc.where, cells, h, NS_DOSE_MAX_VOXELS);
         return -1;
     }
-    long cap = 1024;
-    D->pts = malloc((size_t)cap * 3 * sizeof *D->pts);
-    D->which = malloc((size_t)cap);
-    int hint = -1;
-    for (int k = 0; D->pts && D->which && k < n[2]; k++)
-        for (int j = 0; j < n[1]; j++)
-            for (int i = 0; i < n[0]; i++) {
-                double p[3] = {lo[0] + (i + 0.5) * h, lo[1] + (j + 0.5) * h, lo[2] + (k + 0.5) * h};
-                int t = ns_mesh_locate(m, p, hint, 1e-9, NULL);
-                if (t < 0)
-                    continue;
-                hint = t;
-                int w = -1;
-                for (int q = 2; q >= 0; q--) /* urethra before prostate: the regions are disjoint */
-                    if (m->tet_region[t] == ds->region[q])
-                        w = q;
-                if (w < 0)
-                    continue;
-                if (D->n == cap) {
-                    cap *= 2;
-                    double *np = realloc(D->pts, (size_t)cap * 3 * sizeof *np);
-                    if (np)
-                        D->pts = np;
-                    unsigned char *nw = np ? realloc(D->which, (size_t)cap) : NULL;
-                    if (!nw) {
-                        ns_set_err(err, err_sz, "out of memory");
-                        return -1;
-                    }
-                    D->which = nw;
-                }
-                memcpy(D->pts + 3 * D->n, p, sizeof p);
-                D->which[D->n++] = (unsigned char)w;
-                D->count[w]++;
-            }
-    if (!D->pts || !D->which) {
+    long total = (long)cells;
+    signed char *lab = malloc((size_t)total);
+    if (!lab) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
+    memset(lab, -1, (size_t)total);
+    label_voxels(m, ds->region, lo, h, n, lab);
+    for (long v = 0; v < total; v++)
+        if (lab[v] >= 0)
+            D->count[lab[v]]++;
+    D->n = D->count[0] + D->count[1] + D->count[2];
+    D->pts = malloc((size_t)(D->n > 0 ? D->n : 1) * 3 * sizeof *D->pts);
+    D->which = malloc((size_t)(D->n > 0 ? D->n : 1));
+    if (!D->pts || !D->which) {
+        free(lab);
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    long w = 0;
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                long v = ((long)k * n[1] + j) * n[0] + i;
+                if (lab[v] < 0)
+                    continue;
+                D->pts[3 * w] = lo[0] + (i + 0.5) * h;
+                D->pts[3 * w + 1] = lo[1] + (j + 0.5) * h;
+                D->pts[3 * w + 2] = lo[2] + (k + 0.5) * h;
+                D->which[w++] = (unsigned char)lab[v];
+            }
+    free(lab);
     for (int q = 0; q < 3; q++)
         if (D->count[q] == 0) {
             ns_set_err(err, err_sz,
