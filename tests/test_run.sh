@@ -12,9 +12,12 @@
 # are released, the shipped script hits at least one target, and no obstacle is entered; its
 # dosimetry (planned and delivered figures, dvh.csv) is complete and consistent; and its
 # recorded log replays to the same state. With `scenarios`, every other shipped scenario
-# runs with a finite report.
+# runs with a finite report. With `logs`, the trainee log: a recording replays to the same state
+# (into a copy without the script too), logs from another scenario file or version are refused
+# unless --rescore, malformed and oversized logs are refused naming the line (a separate meson
+# test, not in the sanitizer build).
 #
-# usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR [tutorial|brachytherapy|scenarios]
+# usage: tests/test_run.sh NEEDLESIM_BINARY SOURCE_DIR [tutorial|brachytherapy|scenarios|logs]
 set -u
 
 BIN=${1:?usage: test_run.sh NEEDLESIM_BINARY SOURCE_DIR [PART]}
@@ -40,6 +43,14 @@ PASSED=0
 FAILED=0
 pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
 fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
+# same_run NAME REPORT_A REPORT_B: the two runs have the same state hash and score.
+same_run() {
+    local a b
+    local get='import json,sys; r=json.load(open(sys.argv[1])); print(r["state_hash"], r["score"]["total"])'
+    a=$(python3 -c "$get" "$2" 2>/dev/null)
+    b=$(python3 -c "$get" "$3" 2>/dev/null)
+    if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "$1"; else fail "$1" "$a / $b"; fi
+}
 
 if [ "$PART" = brachytherapy ]; then
 "$BIN" run "$SRC/scenarios/brachytherapy.lua" --video "$TMP/b/brachy.mp4" -o "$TMP/b" \
@@ -216,6 +227,161 @@ fi
 
 TUT="$SRC/scenarios/tutorial.lua"
 
+# The trainee log (`--record`, `--replay`; docs/scenarios.md): a separate meson test, not in the
+# sanitizer build (the log's parser runs under the sanitizers in fuzz_log, docs/reliability.md;
+# `run --replay` in this file's two-needle case and in the checkpoint and live tests there).
+if [ "$PART" = logs ]; then
+"$BIN" run "$TUT" -o "$TMP/t1" --threads 1 --record "$TMP/t1.csv" --no-render --quiet >/dev/null \
+    2>"$TMP/err1" || fail "the recording" "$(head -1 "$TMP/err1")"
+# Replayed into a copy of the scenario without its script: the log alone drives the needle.
+sed '/^    script = function()$/,/^    end,$/d' "$TUT" >"$TMP/noscript.lua"
+if grep -q "act.insert" "$TMP/noscript.lua"; then fail "script removed from the copy" "sed"; fi
+# The copy is another file: the log is refused against it, naming both, unless --rescore.
+"$BIN" run "$TMP/noscript.lua" -o "$TMP/t3" --replay "$TMP/t1.csv" --no-render --quiet >/dev/null 2>"$TMP/err3"
+rc=$?
+if [ $rc = 1 ] && grep -Eq "t1.csv:3: recorded against scenario 'tutorial' \(hash [0-9a-f]{16}\), not 'tutorial' \(hash [0-9a-f]{16}\); --rescore replays it anyway" "$TMP/err3" &&
+    [ ! -e "$TMP/t3/report.json" ]; then
+    pass "a log replayed against another scenario file: exit 1, both hashes named"
+else
+    fail "log against another scenario" "exit $rc: $(head -1 "$TMP/err3")"
+fi
+"$BIN" run "$TMP/noscript.lua" -o "$TMP/t3" --replay "$TMP/t1.csv" --rescore --no-render --quiet >/dev/null 2>"$TMP/err3"
+same_run "--record then --replay --rescore (scenario without its script): same state hash and score" \
+    "$TMP/t1/report.json" "$TMP/t3/report.json"
+if grep -q "re-scored against 'tutorial'" "$TMP/err3"; then pass "--rescore says so on stderr"; else fail "--rescore note" "$(head -1 "$TMP/err3")"; fi
+# The variants below replay a shorter recording (60 steps; the full one is replayed above).
+"$BIN" run "$TUT" -o "$TMP/t1s" --steps 60 --record "$TMP/t1s.csv" --no-render --quiet >/dev/null \
+    2>"$TMP/err1s" || fail "the 60-step recording" "$(head -1 "$TMP/err1s")"
+# A log recorded by another version (#needlesim) is refused too, naming both versions and
+# hashes; --rescore replays it anyway (issue 37).
+sed 's/^#needlesim .*/#needlesim 0.0.9/' "$TMP/t1s.csv" >"$TMP/t1_v.csv"
+"$BIN" run "$TUT" -o "$TMP/t6" --replay "$TMP/t1_v.csv" --no-render --quiet >/dev/null 2>"$TMP/err6"
+rc=$?
+if [ $rc = 1 ] && grep -Eq "t1_v.csv:1: recorded by needlesim 0.0.9 against scenario 'tutorial' \(hash [0-9a-f]{16}\), this is needlesim [0-9.]+ with 'tutorial' \(hash [0-9a-f]{16}\); --rescore replays it anyway" "$TMP/err6" &&
+    [ ! -e "$TMP/t6/report.json" ]; then
+    pass "a log recorded by another version: exit 1, both versions and hashes named"
+else
+    fail "log from another version" "exit $rc: $(head -1 "$TMP/err6")"
+fi
+"$BIN" run "$TUT" -o "$TMP/t6" --replay "$TMP/t1_v.csv" --rescore --no-render --quiet >/dev/null 2>"$TMP/err6"
+same_run "a log from another version replayed with --rescore: same state hash and score" \
+    "$TMP/t1s/report.json" "$TMP/t6/report.json"
+if grep -q "recorded by needlesim 0.0.9 against scenario 'tutorial'.*re-scored against 'tutorial'" "$TMP/err6"; then
+    pass "--rescore of another version's log says so on stderr"
+else
+    fail "--rescore version note" "$(head -1 "$TMP/err6")"
+fi
+# The log's provenance lines; a log without them (older, hand-written) replays with a warning.
+h=$(python3 -c 'import sys
+h = 0xcbf29ce484222325
+for b in open(sys.argv[1], "rb").read():
+    h = ((h ^ b) * 0x100000001b3) % 2**64
+print("%016x" % h)' "$TUT")
+if [ "$(head -3 "$TMP/t1.csv")" = "$(printf '#needlesim %s\n#scenario tutorial\n#scenario_hash %s' "$("$BIN" --version | grep -o '[0-9][0-9.]*' | head -1)" "$h")" ]; then
+    pass "a recorded log starts with #needlesim, #scenario and #scenario_hash (FNV-1a 64 of the file)"
+else
+    fail "log provenance" "$(head -3 "$TMP/t1.csv" | tr '\n' ' ') (want hash $h)"
+fi
+grep -v '^#' "$TMP/t1s.csv" >"$TMP/t1_old.csv"
+"$BIN" run "$TUT" -o "$TMP/t5" --replay "$TMP/t1_old.csv" --no-render --quiet >/dev/null 2>"$TMP/err5"
+rc=$?
+if [ $rc = 0 ] && grep -q "warning: .*t1_old.csv has no #scenario_hash line" "$TMP/err5"; then
+    same_run "a log without provenance replays, with a warning" "$TMP/t1s/report.json" "$TMP/t5/report.json"
+else
+    fail "log without provenance" "exit $rc: $(head -1 "$TMP/err5")"
+fi
+# ... and a log changed in one row drives it elsewhere.
+sed '40s/^\([^,]*\),[^,]*,/\1,0.03,/' "$TMP/t1s.csv" >"$TMP/t1_changed.csv"
+"$BIN" run "$TMP/noscript.lua" -o "$TMP/t4" --replay "$TMP/t1_changed.csv" --rescore --no-render --quiet >/dev/null 2>"$TMP/err4"
+h1=$(grep '"state_hash"' "$TMP/t1s/report.json")
+h4=$(grep '"state_hash"' "$TMP/t4/report.json" 2>/dev/null)
+if [ -n "$h4" ] && [ "$h1" != "$h4" ]; then pass "a log changed in one row gives another state"; else fail "changed log" "$h1 / $h4 $(head -1 "$TMP/err4")"; fi
+if [ "$(grep -vc '^#' "$TMP/t1.csv")" = "$(($(grep -o '"steps": [0-9]*' "$TMP/t1/report.json" | grep -o '[0-9]*$') + 1))" ]; then
+    pass "the log has a header and one row per step"
+else
+    fail "log rows" "$(wc -l <"$TMP/t1.csv") lines"
+fi
+# A malformed row: exit 1 naming the log's line, nothing written.
+bad_log() { # name, sed expression on the log, expected message (grep -E)
+    sed "$2" "$TMP/t1.csv" >"$TMP/$1.csv"
+    mkdir -p "$TMP/o_$1"
+    echo '{"stale": true}' >"$TMP/o_$1/report.json"
+    "$BIN" run "$TUT" -o "$TMP/o_$1" --replay "$TMP/$1.csv" --no-render --quiet >/dev/null 2>"$TMP/err_$1"
+    local rc=$?
+    if [ $rc = 1 ] && grep -Eq "$3" "$TMP/err_$1" && grep -q stale "$TMP/o_$1/report.json"; then
+        pass "$1: exit 1, the earlier report kept, $(head -1 "$TMP/err_$1" | sed "s|$TMP/||")"
+    else
+        fail "$1" "exit $rc: $(head -2 "$TMP/err_$1")"
+    fi
+}
+# (lines 1-3 are #needlesim, #scenario and #scenario_hash; the header is line 4)
+bad_log log_bad_number '8s/^\([^,]*\),[^,]*,/\1,fast,/' "log_bad_number.csv:8: v_insert_m_s must be a finite number \(got 'fast'\)"
+bad_log log_short_row '10s/,[^,]*$//' "log_short_row.csv:10: expected 7 comma-separated fields"
+bad_log log_bad_time '12s/^[^,]*,/0.5,/' "log_bad_time.csv:12: t_s is 0.5 but row 8"
+bad_log log_bad_event '7s/,$/,explode/' "log_bad_event.csv:7: unknown event 'explode'"
+bad_log log_bad_needle '9s/,$/,next_needle:0;0;0;0;0;0/' "log_bad_needle.csv:9: next_needle: expected px;py;pz;dx;dy;dz"
+bad_log log_bad_header '4s/t_s/time/' "log_bad_header.csv:4: the header must be"
+# Controls beyond the limits of sim/ns_limits.h.
+bad_log log_fast '8s/^\([^,]*\),[^,]*,/\1,1e9,/' "log_fast.csv:8: v_insert_m_s 1e\+09 m/s is beyond the limit of 0.5 m/s"
+bad_log log_base '9s/^\([^,]*\),\([^,]*\),[^,]*,/\1,\2,-0.7,/' "log_base.csv:9: base_vx_m_s -0.7 m/s is beyond the limit of 0.5 m/s"
+bad_log log_spin '10s/,[^,]*,\([^,]*\)$/,1000,\1/' "log_spin.csv:10: twist_rate_rad_s 1000 rad/s is beyond the limit of 63 rad/s"
+# Provenance lines that do not parse; a log recorded against another file of the same name.
+bad_log log_bad_hash '3s/ .*/ 12345/' "log_bad_hash.csv:3: #scenario_hash must be 16 hex digits \(got '12345'\)"
+bad_log log_bad_trainee '3a#trainee a/b' "log_bad_trainee.csv:4: #trainee must be 1 to 64 characters"
+bad_log log_other_hash '3s/ .*/ 0123456789abcdef/' "log_other_hash.csv:3: recorded against scenario 'tutorial' \(hash 0123456789abcdef\), not 'tutorial'"
+# #model (a live session's own dt and solver settings): malformed; rows that do not step by its dt.
+bad_log log_bad_model '3a#model dt=0.02 tolerance=1e-6' "log_bad_model.csv:4: #model must be 'dt=D tolerance=T"
+bad_log log_model_dt '3a#model dt=0.02 tolerance=1e-08 check_tolerance=1e-06 lazy_threshold=0.01' \
+    "log_model_dt.csv:7: t_s is 0.01 but row 2 of a run stepping by dt = 0.02 s"
+# Rows: at most NS_LIMIT_STEPS (2,000,000).
+python3 - "$TMP/t1.csv" "$TMP/log_rows.csv" <<'PY'
+import sys
+lines = open(sys.argv[1]).read().splitlines()
+with open(sys.argv[2], "w") as f:
+    f.write("\n".join(lines[:4]) + "\n")
+    for k in range(2000001):
+        f.write("%.17g,0,0,0,0,0,\n" % (k * 0.01))
+PY
+"$BIN" run "$TUT" -o "$TMP/o_rows" --replay "$TMP/log_rows.csv" --no-render --quiet >/dev/null 2>"$TMP/err_rows"
+rc=$?
+if [ $rc = 1 ] && grep -q "log_rows.csv:2000005: more than 2000000 rows" "$TMP/err_rows"; then
+    pass "a log of more than NS_LIMIT_STEPS rows: exit 1"
+else
+    fail "log rows limit" "exit $rc: $(head -1 "$TMP/err_rows")"
+fi
+rm -f "$TMP/log_rows.csv"
+# Not a regular file, or too large: refused before it is read (timeout: it must not block).
+mkfifo "$TMP/log_fifo.csv"
+truncate -s 300M "$TMP/log_huge.csv"
+for f in "$TMP/log_fifo.csv:is a FIFO" "/dev/zero:is a character device" "$TMP/log_huge.csv:is 314572800 bytes, more than the limit"; do
+    timeout 20 "$BIN" run "$TUT" -o "$TMP/o_fifo" --replay "${f%%:*}" --quiet >/dev/null 2>"$TMP/err_fifo"
+    rc=$?
+    if [ $rc = 1 ] && grep -q "${f#*:}" "$TMP/err_fifo"; then
+        pass "--replay $(basename "${f%%:*}"): exit 1 at once"
+    else
+        fail "--replay ${f%%:*}" "exit $rc: $(head -1 "$TMP/err_fifo")"
+    fi
+done
+rm -f "$TMP/log_huge.csv"
+# --trainee and --session go into the log; IDs outside [A-Za-z0-9._-]{1,64} are usage errors.
+"$BIN" run "$TUT" -o "$TMP/o_ids" --steps 3 --no-render --trainee A-17 --session 2026.11.27_3 \
+    --record "$TMP/ids.csv" --quiet >/dev/null 2>"$TMP/err_ids"
+if [ $? = 0 ] && sed -n 4,5p "$TMP/ids.csv" | tr '\n' ' ' | grep -q "^#trainee A-17 #session 2026.11.27_3 $"; then
+    pass "--trainee and --session are written into the log"
+else
+    fail "--trainee/--session" "$(head -1 "$TMP/err_ids") $(head -5 "$TMP/ids.csv" | tr '\n' ' ')"
+fi
+for args in "--trainee a,b" "--session $(printf 'x%.0s' $(seq 65))" "--trainee" "--rescore"; do
+    # shellcheck disable=SC2086
+    "$BIN" run "$TUT" -o "$TMP/o_ids2" $args >/dev/null 2>"$TMP/err_ids2"
+    rc=$?
+    if [ $rc = 2 ]; then pass "run ${args:0:20}...: usage error, exit 2"; else fail "run $args" "exit $rc"; fi
+done
+    echo "$PASSED passed, $FAILED failed"
+    [ "$FAILED" = 0 ]
+    exit
+fi
+
 # The tutorial, one thread, then two.
 "$BIN" run "$TUT" -o "$TMP/t1" --threads 1 --record "$TMP/t1.csv" >"$TMP/out1" 2>"$TMP/err1"
 rc=$?
@@ -265,7 +431,7 @@ print("steps %d, target error %.2f mm, score %.1f" % (r["steps"], r["targets"][0
 PY
 if [ $? = 0 ]; then pass "report keys present and finite, target hit ($(cat "$TMP/py"))"; else fail "report" "$(tail -1 "$TMP/py")"; fi
 
-"$BIN" run "$TUT" -o "$TMP/t2" --threads 2 --quiet >"$TMP/out2" 2>"$TMP/err2"
+"$BIN" run "$TUT" -o "$TMP/t2" --threads 2 --no-render --quiet >"$TMP/out2" 2>"$TMP/err2"
 h1=$(grep '"state_hash"' "$TMP/t1/report.json")
 h2=$(grep '"state_hash"' "$TMP/t2/report.json" 2>/dev/null)
 if [ -n "$h1" ] && [ "$h1" = "$h2" ]; then pass "same state hash with 1 and 2 threads"; else fail "state hash, 1 vs 2 threads" "$h1 / $h2"; fi
@@ -278,156 +444,6 @@ done
 p1=$(grep '"state_hash"' "$TMP/p1/report.json" 2>/dev/null)
 p2=$(grep '"state_hash"' "$TMP/p2/report.json" 2>/dev/null)
 if [ -n "$p1" ] && [ "$p1" = "$p2" ]; then pass "paper solver: same state hash with 1 and 2 threads"; else fail "paper solver, 1 vs 2 threads" "$p1 / $p2 $(head -1 "$TMP/errp1")"; fi
-
-# The recorded controls replayed: the same state and score.
-same_run() { # name, report A, report B
-    local a b
-    local get='import json,sys; r=json.load(open(sys.argv[1])); print(r["state_hash"], r["score"]["total"])'
-    a=$(python3 -c "$get" "$2" 2>/dev/null)
-    b=$(python3 -c "$get" "$3" 2>/dev/null)
-    if [ -n "$a" ] && [ "$a" = "$b" ]; then pass "$1"; else fail "$1" "$a / $b"; fi
-}
-# Replayed into a copy of the scenario without its script: the log alone drives the needle.
-sed '/^    script = function()$/,/^    end,$/d' "$TUT" >"$TMP/noscript.lua"
-if grep -q "act.insert" "$TMP/noscript.lua"; then fail "script removed from the copy" "sed"; fi
-# The copy is another file: the log is refused against it, naming both, unless --rescore.
-"$BIN" run "$TMP/noscript.lua" -o "$TMP/t3" --replay "$TMP/t1.csv" --quiet >/dev/null 2>"$TMP/err3"
-rc=$?
-if [ $rc = 1 ] && grep -Eq "t1.csv:3: recorded against scenario 'tutorial' \(hash [0-9a-f]{16}\), not 'tutorial' \(hash [0-9a-f]{16}\); --rescore replays it anyway" "$TMP/err3" &&
-    [ ! -e "$TMP/t3/report.json" ]; then
-    pass "a log replayed against another scenario file: exit 1, both hashes named"
-else
-    fail "log against another scenario" "exit $rc: $(head -1 "$TMP/err3")"
-fi
-"$BIN" run "$TMP/noscript.lua" -o "$TMP/t3" --replay "$TMP/t1.csv" --rescore --quiet >/dev/null 2>"$TMP/err3"
-same_run "--record then --replay --rescore (scenario without its script): same state hash and score" \
-    "$TMP/t1/report.json" "$TMP/t3/report.json"
-if grep -q "re-scored against 'tutorial'" "$TMP/err3"; then pass "--rescore says so on stderr"; else fail "--rescore note" "$(head -1 "$TMP/err3")"; fi
-# A log recorded by another version (#needlesim) is refused too, naming both versions and
-# hashes; --rescore replays it anyway (issue 37).
-sed 's/^#needlesim .*/#needlesim 0.0.9/' "$TMP/t1.csv" >"$TMP/t1_v.csv"
-"$BIN" run "$TUT" -o "$TMP/t6" --replay "$TMP/t1_v.csv" --quiet >/dev/null 2>"$TMP/err6"
-rc=$?
-if [ $rc = 1 ] && grep -Eq "t1_v.csv:1: recorded by needlesim 0.0.9 against scenario 'tutorial' \(hash [0-9a-f]{16}\), this is needlesim [0-9.]+ with 'tutorial' \(hash [0-9a-f]{16}\); --rescore replays it anyway" "$TMP/err6" &&
-    [ ! -e "$TMP/t6/report.json" ]; then
-    pass "a log recorded by another version: exit 1, both versions and hashes named"
-else
-    fail "log from another version" "exit $rc: $(head -1 "$TMP/err6")"
-fi
-"$BIN" run "$TUT" -o "$TMP/t6" --replay "$TMP/t1_v.csv" --rescore --quiet >/dev/null 2>"$TMP/err6"
-same_run "a log from another version replayed with --rescore: same state hash and score" \
-    "$TMP/t1/report.json" "$TMP/t6/report.json"
-if grep -q "recorded by needlesim 0.0.9 against scenario 'tutorial'.*re-scored against 'tutorial'" "$TMP/err6"; then
-    pass "--rescore of another version's log says so on stderr"
-else
-    fail "--rescore version note" "$(head -1 "$TMP/err6")"
-fi
-# The log's provenance lines; a log without them (older, hand-written) replays with a warning.
-h=$(python3 -c 'import sys
-h = 0xcbf29ce484222325
-for b in open(sys.argv[1], "rb").read():
-    h = ((h ^ b) * 0x100000001b3) % 2**64
-print("%016x" % h)' "$TUT")
-if [ "$(head -3 "$TMP/t1.csv")" = "$(printf '#needlesim %s\n#scenario tutorial\n#scenario_hash %s' "$("$BIN" --version | grep -o '[0-9][0-9.]*' | head -1)" "$h")" ]; then
-    pass "a recorded log starts with #needlesim, #scenario and #scenario_hash (FNV-1a 64 of the file)"
-else
-    fail "log provenance" "$(head -3 "$TMP/t1.csv" | tr '\n' ' ') (want hash $h)"
-fi
-grep -v '^#' "$TMP/t1.csv" >"$TMP/t1_old.csv"
-"$BIN" run "$TUT" -o "$TMP/t5" --replay "$TMP/t1_old.csv" --quiet >/dev/null 2>"$TMP/err5"
-rc=$?
-if [ $rc = 0 ] && grep -q "warning: .*t1_old.csv has no #scenario_hash line" "$TMP/err5"; then
-    same_run "a log without provenance replays, with a warning" "$TMP/t1/report.json" "$TMP/t5/report.json"
-else
-    fail "log without provenance" "exit $rc: $(head -1 "$TMP/err5")"
-fi
-# ... and a log changed in one row drives it elsewhere.
-sed '40s/^\([^,]*\),[^,]*,/\1,0.03,/' "$TMP/t1.csv" >"$TMP/t1_changed.csv"
-"$BIN" run "$TMP/noscript.lua" -o "$TMP/t4" --replay "$TMP/t1_changed.csv" --rescore --quiet >/dev/null 2>"$TMP/err4"
-h1=$(grep '"state_hash"' "$TMP/t1/report.json")
-h4=$(grep '"state_hash"' "$TMP/t4/report.json" 2>/dev/null)
-if [ -n "$h4" ] && [ "$h1" != "$h4" ]; then pass "a log changed in one row gives another state"; else fail "changed log" "$h1 / $h4 $(head -1 "$TMP/err4")"; fi
-if [ "$(grep -vc '^#' "$TMP/t1.csv")" = "$(($(grep -o '"steps": [0-9]*' "$TMP/t1/report.json" | grep -o '[0-9]*$') + 1))" ]; then
-    pass "the log has a header and one row per step"
-else
-    fail "log rows" "$(wc -l <"$TMP/t1.csv") lines"
-fi
-# A malformed row: exit 1 naming the log's line, nothing written.
-bad_log() { # name, sed expression on the log, expected message (grep -E)
-    sed "$2" "$TMP/t1.csv" >"$TMP/$1.csv"
-    mkdir -p "$TMP/o_$1"
-    echo '{"stale": true}' >"$TMP/o_$1/report.json"
-    "$BIN" run "$TUT" -o "$TMP/o_$1" --replay "$TMP/$1.csv" --quiet >/dev/null 2>"$TMP/err_$1"
-    local rc=$?
-    if [ $rc = 1 ] && grep -Eq "$3" "$TMP/err_$1" && grep -q stale "$TMP/o_$1/report.json"; then
-        pass "$1: exit 1, the earlier report kept, $(head -1 "$TMP/err_$1" | sed "s|$TMP/||")"
-    else
-        fail "$1" "exit $rc: $(head -2 "$TMP/err_$1")"
-    fi
-}
-# (lines 1-3 are #needlesim, #scenario and #scenario_hash; the header is line 4)
-bad_log log_bad_number '8s/^\([^,]*\),[^,]*,/\1,fast,/' "log_bad_number.csv:8: v_insert_m_s must be a finite number \(got 'fast'\)"
-bad_log log_short_row '10s/,[^,]*$//' "log_short_row.csv:10: expected 7 comma-separated fields"
-bad_log log_bad_time '12s/^[^,]*,/0.5,/' "log_bad_time.csv:12: t_s is 0.5 but row 8"
-bad_log log_bad_event '7s/,$/,explode/' "log_bad_event.csv:7: unknown event 'explode'"
-bad_log log_bad_needle '9s/,$/,next_needle:0;0;0;0;0;0/' "log_bad_needle.csv:9: next_needle: expected px;py;pz;dx;dy;dz"
-bad_log log_bad_header '4s/t_s/time/' "log_bad_header.csv:4: the header must be"
-# Controls beyond the limits of sim/ns_limits.h.
-bad_log log_fast '8s/^\([^,]*\),[^,]*,/\1,1e9,/' "log_fast.csv:8: v_insert_m_s 1e\+09 m/s is beyond the limit of 0.5 m/s"
-bad_log log_base '9s/^\([^,]*\),\([^,]*\),[^,]*,/\1,\2,-0.7,/' "log_base.csv:9: base_vx_m_s -0.7 m/s is beyond the limit of 0.5 m/s"
-bad_log log_spin '10s/,[^,]*,\([^,]*\)$/,1000,\1/' "log_spin.csv:10: twist_rate_rad_s 1000 rad/s is beyond the limit of 63 rad/s"
-# Provenance lines that do not parse; a log recorded against another file of the same name.
-bad_log log_bad_hash '3s/ .*/ 12345/' "log_bad_hash.csv:3: #scenario_hash must be 16 hex digits \(got '12345'\)"
-bad_log log_bad_trainee '3a#trainee a/b' "log_bad_trainee.csv:4: #trainee must be 1 to 64 characters"
-bad_log log_other_hash '3s/ .*/ 0123456789abcdef/' "log_other_hash.csv:3: recorded against scenario 'tutorial' \(hash 0123456789abcdef\), not 'tutorial'"
-# #model (a live session's own dt and solver settings): malformed; rows that do not step by its dt.
-bad_log log_bad_model '3a#model dt=0.02 tolerance=1e-6' "log_bad_model.csv:4: #model must be 'dt=D tolerance=T"
-bad_log log_model_dt '3a#model dt=0.02 tolerance=1e-08 check_tolerance=1e-06 lazy_threshold=0.01' \
-    "log_model_dt.csv:7: t_s is 0.01 but row 2 of a run stepping by dt = 0.02 s"
-# Rows: at most NS_LIMIT_STEPS (2,000,000).
-python3 - "$TMP/t1.csv" "$TMP/log_rows.csv" <<'PY'
-import sys
-lines = open(sys.argv[1]).read().splitlines()
-with open(sys.argv[2], "w") as f:
-    f.write("\n".join(lines[:4]) + "\n")
-    for k in range(2000001):
-        f.write("%.17g,0,0,0,0,0,\n" % (k * 0.01))
-PY
-"$BIN" run "$TUT" -o "$TMP/o_rows" --replay "$TMP/log_rows.csv" --quiet >/dev/null 2>"$TMP/err_rows"
-rc=$?
-if [ $rc = 1 ] && grep -q "log_rows.csv:2000005: more than 2000000 rows" "$TMP/err_rows"; then
-    pass "a log of more than NS_LIMIT_STEPS rows: exit 1"
-else
-    fail "log rows limit" "exit $rc: $(head -1 "$TMP/err_rows")"
-fi
-rm -f "$TMP/log_rows.csv"
-# Not a regular file, or too large: refused before it is read (timeout: it must not block).
-mkfifo "$TMP/log_fifo.csv"
-truncate -s 300M "$TMP/log_huge.csv"
-for f in "$TMP/log_fifo.csv:is a FIFO" "/dev/zero:is a character device" "$TMP/log_huge.csv:is 314572800 bytes, more than the limit"; do
-    timeout 20 "$BIN" run "$TUT" -o "$TMP/o_fifo" --replay "${f%%:*}" --quiet >/dev/null 2>"$TMP/err_fifo"
-    rc=$?
-    if [ $rc = 1 ] && grep -q "${f#*:}" "$TMP/err_fifo"; then
-        pass "--replay $(basename "${f%%:*}"): exit 1 at once"
-    else
-        fail "--replay ${f%%:*}" "exit $rc: $(head -1 "$TMP/err_fifo")"
-    fi
-done
-rm -f "$TMP/log_huge.csv"
-# --trainee and --session go into the log; IDs outside [A-Za-z0-9._-]{1,64} are usage errors.
-"$BIN" run "$TUT" -o "$TMP/o_ids" --steps 3 --no-render --trainee A-17 --session 2026.11.27_3 \
-    --record "$TMP/ids.csv" --quiet >/dev/null 2>"$TMP/err_ids"
-if [ $? = 0 ] && sed -n 4,5p "$TMP/ids.csv" | tr '\n' ' ' | grep -q "^#trainee A-17 #session 2026.11.27_3 $"; then
-    pass "--trainee and --session are written into the log"
-else
-    fail "--trainee/--session" "$(head -1 "$TMP/err_ids") $(head -5 "$TMP/ids.csv" | tr '\n' ' ')"
-fi
-for args in "--trainee a,b" "--session $(printf 'x%.0s' $(seq 65))" "--trainee" "--rescore"; do
-    # shellcheck disable=SC2086
-    "$BIN" run "$TUT" -o "$TMP/o_ids2" $args >/dev/null 2>"$TMP/err_ids2"
-    rc=$?
-    if [ $rc = 2 ]; then pass "run ${args:0:20}...: usage error, exit 2"; else fail "run $args" "exit $rc"; fi
-done
 
 # Bad input: exit 1, one line naming the file and line or field, no report.json.
 bad() { # name, sed expression on the tutorial, expected message (grep -E)
@@ -524,7 +540,7 @@ assert t["error_mm"] < 1.0, t
 print("act.retract{to}: in to %.2f mm, back to %.2f mm, the tip %.2f mm from the target" % (1e3 * max(d), 1e3 * d[-1], t["error_mm"]))'
 
 # --set: a key the scenario does not read is an error naming the file and the key.
-"$BIN" run "$TUT" --set needle.kynd=stiff -o "$TMP/o_set" --quiet >/dev/null 2>"$TMP/err_set"
+"$BIN" run "$TUT" --set needle.kynd=stiff -o "$TMP/o_set" --no-render --quiet >/dev/null 2>"$TMP/err_set"
 rc=$?
 if [ $rc = 1 ] && grep -q "tutorial.lua: --set needle.kynd: the scenario has no parameter" "$TMP/err_set" &&
     [ ! -e "$TMP/o_set/report.json" ]; then
@@ -570,9 +586,9 @@ fi
 sed 's/act.wait { time = 0.2 }/act.retract { speed = 0.04 }; act.next_needle { point = { 0.01, 0, 0 }, direction = { 0, 0, 1 } }; act.insert { speed = 0.04, depth = 0.02 }/' \
     "$TUT" >"$TMP/two_needles.lua"
 sed '/^    script = function()$/,/^    end,$/d' "$TMP/two_needles.lua" >"$TMP/two_needles_noscript.lua"
-"$BIN" run "$TMP/two_needles.lua" -o "$TMP/tn1" --record "$TMP/tn.csv" --quiet >/dev/null 2>"$TMP/err_tn1"
+"$BIN" run "$TMP/two_needles.lua" -o "$TMP/tn1" --record "$TMP/tn.csv" --no-render --quiet >/dev/null 2>"$TMP/err_tn1"
 rc=$?
-"$BIN" run "$TMP/two_needles_noscript.lua" -o "$TMP/tn2" --replay "$TMP/tn.csv" --rescore --quiet >/dev/null 2>"$TMP/err_tn2"
+"$BIN" run "$TMP/two_needles_noscript.lua" -o "$TMP/tn2" --replay "$TMP/tn.csv" --rescore --no-render --quiet >/dev/null 2>"$TMP/err_tn2"
 if [ $rc = 0 ] && grep -q "next_needle:0.01" "$TMP/tn.csv" && python3 - "$TMP/tn1/report.json" <<'PY' 2>"$TMP/py_tn"; then
 import json, sys
 r = json.load(open(sys.argv[1]))
