@@ -24,6 +24,19 @@ trap cleanup EXIT
 PASSED=0
 FAILED=0
 pass() { echo "ok    $1"; PASSED=$((PASSED + 1)); }
+# At exit, the sanitizer build's LeakSanitizer stops every thread to scan memory; now and then
+# its tracer cannot ("LeakSanitizer has encountered a fatal error": google/sanitizers#1353,
+# seen here twice in the live tests under load). That is no leak report, so it does not fail a
+# check (a leak prints "detected memory leaks" and still does); it is said on the check's line.
+tracer_failed() { # ERR_FILE
+    grep -q "LeakSanitizer has encountered a fatal error" "$1" &&
+        ! grep -q "detected memory leaks" "$1"
+}
+exit_ok() { # RC ERR_FILE: 0 for exit 0, or for LeakSanitizer's tracer failing at exit
+    [ "$1" -eq 0 ] && return 0
+    tracer_failed "$2" && NOTE=" (LeakSanitizer's tracer failed at exit: not a leak report)"
+}
+NOTE=""
 fail() { echo "FAIL  $1: $2"; FAILED=$((FAILED + 1)); }
 
 # ---- usage errors ----
@@ -49,7 +62,8 @@ if start session "$SRC/scenarios/tutorial.lua" --port 0 -o "$OUT" --width 480 --
     fi
     wait_exit "$PID" 120
     rc=$?
-    [ $rc -eq 0 ] && pass "session: exit 0 after the client's end" ||
+    NOTE=""
+    exit_ok $rc "$TMP/session.err" && pass "session: exit 0 after the client's end$NOTE" ||
         fail "session: exit" "$rc: $(tail -3 "$TMP/session.err")"
 else
     fail "session: start" "$(tail -3 "$TMP/session.err")"
@@ -97,7 +111,8 @@ if start scripted "$TMP/scripted.lua" --port 0 -o "$OUT3" --width 320 --height 1
     fi
     wait_exit "$PID" 120
     rc=$?
-    [ $rc -eq 0 ] && pass "scripted: exit 0" || fail "scripted: exit" "$rc"
+    NOTE=""
+    exit_ok $rc "$TMP/scripted.err" && pass "scripted: exit 0$NOTE" || fail "scripted: exit" "$rc"
     if r=$(replay_same "$TMP/scripted.lua" "$OUT3" "$OUT3/controls.csv" replay3); then
         pass "scripted: the replay gives the same state hash, score and steps"
     else
@@ -119,7 +134,8 @@ if start token "$SRC/scenarios/tutorial.lua" --bind 0.0.0.0 --port 0 -o "$OUT2" 
     kill -TERM "$PID"
     wait_exit "$PID" 120
     rc=$?
-    [ $rc -eq 0 ] && pass "token: SIGTERM ends the session, exit 0" ||
+    NOTE=""
+    exit_ok $rc "$TMP/token.err" && pass "token: SIGTERM ends the session, exit 0$NOTE" ||
         fail "token: SIGTERM" "exit $rc: $(tail -3 "$TMP/token.err")"
     [ -s "$OUT2/report.json" ] && [ -s "$TMP/token.csv" ] &&
         grep -q '"ended_by": "signal"' "$OUT2/report.json" &&
@@ -130,8 +146,16 @@ else
 fi
 
 # ---- bench --live: its synthetic client drives a session end to end ----
-if (timeout 300 "$BIN" bench --live "$SRC/scenarios/tutorial.lua" --seconds 3 \
-    --json --width 320 --height 180 -o "$TMP/bench" >"$TMP/bench.json" 2>"$TMP/bench.err") &&
+# bench_live OUT_JSON ERR ARGS...: `bench --live ARGS`, once more if LeakSanitizer's tracer failed
+bench_live() {
+    local out=$1 err=$2
+    shift 2
+    timeout 300 "$BIN" bench --live "$@" >"$out" 2>"$err" && return 0
+    tracer_failed "$err" || return 1
+    timeout 300 "$BIN" bench --live "$@" >"$out" 2>"$err"
+}
+if bench_live "$TMP/bench.json" "$TMP/bench.err" "$SRC/scenarios/tutorial.lua" --seconds 3 \
+    --json --width 320 --height 180 -o "$TMP/bench" &&
     "$PY" - "$TMP/bench.json" <<'PY'; then
 import json, sys
 b = json.load(open(sys.argv[1]))
@@ -147,9 +171,8 @@ fi
 
 # ---- --accuracy: dt and solver settings from the measured front; the log's #model; its replay ----
 OUT4="$TMP/accuracy"
-if (timeout 300 "$BIN" bench --live "$SRC/scenarios/tutorial.lua" --seconds 3 --accuracy 0.5e-3 \
-    --front brachytherapy --json --width 320 --height 180 -o "$OUT4" >"$TMP/acc.json" \
-    2>"$TMP/acc.err") &&
+if bench_live "$TMP/acc.json" "$TMP/acc.err" "$SRC/scenarios/tutorial.lua" --seconds 3 \
+    --accuracy 0.5e-3 --front brachytherapy --json --width 320 --height 180 -o "$OUT4" &&
     grep -q '^#model dt=0.02 tolerance=9.99.*e-07 check_tolerance=9.99.*e-05 lazy_threshold=0.05' \
         "$OUT4/controls.csv" &&
     "$PY" - "$OUT4/report.json" <<'PY'; then
