@@ -116,7 +116,6 @@ int ns_run_outputs_prepare(NsRun *r, char *err, int err_sz)
          (r->opt.record && ns_out_replaceable(r->opt.record, "the control log", err, err_sz)) ||
          (r->opt.video && ns_out_replaceable(r->opt.video, "the video", err, err_sz))))
         rc = -1;
-
     /* An earlier run's outputs stay until this run succeeds: the renames at the end replace
      * them, and a failed run leaves them as they were. */
     free(old_t);
