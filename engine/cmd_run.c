@@ -311,10 +311,10 @@ static void print_summary(NsRun *r, const NsRunResults *res, uint64_t hash)
         if (r->obst[k].violated)
             printf("obstacle %s entered at t = %.2f s, %.1f mm deep\n", r->spec.obstacles[k].name,
                    r->obst[k].first_t, 1e3 * r->obst[k].max_depth);
-    printf("score %.1f / 100 (targets %.1f, obstacles -%.0f); insertions %d; warnings: NaN %d, "
-           "inverted %d, unconverged %d, friction unresolved %d\n",
-           res->total, res->target_part, res->obstacle_penalty, r->insertions, r->nan, r->inverted,
-           r->unconverged, r->lcp_unresolved);
+    char warned[256];
+    ns_run_warnings_line(&r->warn, warned, sizeof warned);
+    printf("score %.1f / 100 (targets %.1f, obstacles -%.0f); insertions %d; %s\n", res->total,
+           res->target_part, res->obstacle_penalty, r->insertions, warned);
     printf("wrote %s/report.json and %s/trajectory.csv (state hash %016llx)\n", r->opt.out_dir,
            r->opt.out_dir, (unsigned long long)hash);
     if (r->rendering) {

@@ -318,6 +318,7 @@ int ns_run_release_seed(NsRun *r, double t, char *err, int err_sz)
         return -1;
     }
     r->tip_hint = tet;
+    ns_run_warnings_read(&r->warn); /* the seed's material point */
     if (r->seed_n == r->seed_cap) {
         int cap = r->seed_cap ? 2 * r->seed_cap : 16;
         struct Seed *sd = realloc(r->seeds, (size_t)cap * sizeof *sd);
@@ -493,7 +494,11 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
     double w0 = ns_wall_s();
     int rc = ns_step(&r->c, &step_ctl, sp->dt, &st);
     double w = 1e3 * (ns_wall_s() - w0);
-    r->nan += st.nan_count;
+    int warned[NS_WARN_KINDS] = {[NS_WARN_NAN] = st.nan_count,
+                                 [NS_WARN_INVERTED] = st.inverted,
+                                 [NS_WARN_UNCONVERGED] = st.unconverged,
+                                 [NS_WARN_LCP] = st.consistent == 0};
+    ns_run_warnings_step(&r->warn, warned);
     if (rc) {
         const double *tp = ns_run_tip(r);
         const NsMesh *M = &r->tissue.mesh;
@@ -516,16 +521,14 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
+    int events = r->event_n;
     if (ns_run_record_events(r, &st, (double)r->steps * sp->dt, ns_run_tip(r))) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
     r->exited = st.reentered ? 0 : r->exited | st.exited; /* out, until it enters again */
-    r->inverted += st.inverted;
     r->repaired += st.remesh_repaired;
-    r->unconverged += st.unconverged;
     r->consistent += st.consistent != 0;
-    r->lcp_unresolved += st.consistent == 0;
     r->max_axial = fmax(r->max_axial, fabs(st.axial_force));
     r->last_axial = st.axial_force;
     r->last_fr[0] = st.n_static;
@@ -567,6 +570,12 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
     if (r->traj)
         fputc('\n', r->traj);
     ns_run_check_obstacles(r, (double)r->steps * sp->dt, r->exited);
+    /* results read from this state: an event's place, an obstacle's depth (run_warnings.h) */
+    bool inside = false;
+    for (int k = 0; k < sp->obstacle_count; k++)
+        inside |= r->obst[k].inside;
+    if (inside || r->event_n > events)
+        ns_run_warnings_read(&r->warn);
     if (r->rendering && ns_run_render_after_step(r, &st, ctl.drop_seed, err, err_sz))
         return -1;
     return 0;
@@ -661,6 +670,7 @@ int ns_run_load(NsRun *r, char *err, int err_sz)
 int ns_run_end(NsRun *r, NsRunResults *res, uint64_t *hash, char *err, int err_sz)
 {
     int rc = 0;
+    ns_run_warnings_read(&r->warn); /* the targets, the seeds, the dose */
     if (rc == 0 && ns_run_score(r, res)) {
         ns_set_err(err, err_sz, "out of memory");
         rc = -1;

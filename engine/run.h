@@ -16,6 +16,7 @@
 #include "rod.h"
 #include "run_render.h"
 #include "run_spec.h"
+#include "run_warnings.h"
 #include "scenario.h"
 #include "series.h"
 #include "tissue.h"
@@ -89,8 +90,9 @@ typedef struct NsRun {
     NsSeries step_ms, total_ms, lcp_ms, tissue_ms, needle_ms, remesh_ms, trials, iterations;
     long steps;
     long factorizations; /* of the tissue matrix, made or adopted (schur; the paper's needs none) */
-    int consistent, nan, inverted, unconverged, lcp_unresolved;
-    int repaired; /* tissue nodes moved by the remesher's repair (ns_remesh_repair) */
+    int consistent;
+    NsRunWarnings warn; /* NaN, inverted, unconverged, friction unresolved (run_warnings.h) */
+    int repaired;       /* tissue nodes moved by the remesher's repair (ns_remesh_repair) */
     /* the tissue mesh's worst dihedral angle over every step, at rest and deformed
      * (min_dihedral_deg_any_step, sim/quality_watch.h) */
     NsDihedralWatch dw;

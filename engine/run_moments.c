@@ -294,9 +294,7 @@ int ns_run_render_end(NsRun *r, const NsRunResults *res, char *err, int err_sz)
     snprintf(rows[n++], sizeof rows[0],
              "score %.1f / 100 (targets %.1f, obstacles -%.0f); insertions %d", res->total,
              res->target_part, res->obstacle_penalty, r->insertions);
-    snprintf(rows[n++], sizeof rows[0],
-             "warnings: NaN %d, inverted %d, unconverged %d, friction unresolved %d", r->nan,
-             r->inverted, r->unconverged, r->lcp_unresolved);
+    ns_run_warnings_line(&r->warn, rows[n++], sizeof rows[0]);
     const char *table[ROWS];
     for (int i = 0; i < n; i++)
         table[i] = rows[i];

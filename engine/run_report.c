@@ -329,14 +329,15 @@ static void report_outcome(NsJson *j, NsRun *r, const NsRunResults *res)
     ns_json_key(j, "warnings");
     ns_json_begin_object(j);
     ns_json_key(j, "nan");
-    ns_json_int(j, r->nan);
+    ns_json_int(j, r->warn.total[NS_WARN_NAN]);
     ns_json_key(j, "inverted");
-    ns_json_int(j, r->inverted);
+    ns_json_int(j, r->warn.total[NS_WARN_INVERTED]);
     ns_json_key(j, "unconverged");
-    ns_json_int(j, r->unconverged);
+    ns_json_int(j, r->warn.total[NS_WARN_UNCONVERGED]);
     ns_json_key(j, "lcp_unresolved");
-    ns_json_int(j, r->lcp_unresolved);
+    ns_json_int(j, r->warn.total[NS_WARN_LCP]);
     ns_json_end_object(j);
+    ns_run_warnings_report(j, &r->warn);
 }
 
 /* report.json: the pictures (docs/rendering.md). */
@@ -434,8 +435,10 @@ static int write_score_row(NsRun *r, const NsRunResults *res, uint64_t hash, cha
     ns_csv_field(f, list);
     fprintf(f, ",%d,", res->violated);
     ns_csv_field(f, obst);
-    fprintf(f, ",%.6g,%ld,%d,%d,%d,%d,%016llx\n", (double)r->steps * r->spec.dt, r->steps, r->nan,
-            r->inverted, r->unconverged, r->lcp_unresolved, (unsigned long long)hash);
+    fprintf(f, ",%.6g,%ld,%d,%d,%d,%d,%016llx\n", (double)r->steps * r->spec.dt, r->steps,
+            r->warn.total[NS_WARN_NAN], r->warn.total[NS_WARN_INVERTED],
+            r->warn.total[NS_WARN_UNCONVERGED], r->warn.total[NS_WARN_LCP],
+            (unsigned long long)hash);
     if (fclose(f) != 0) {
         ns_set_err(err, err_sz, "cannot write '%s': %s", r->row_tmp, strerror(errno));
         return -1;

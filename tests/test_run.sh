@@ -179,6 +179,40 @@ PY
             fail "$sc" "exit $rc: $(head -1 "$TMP/err_$sc") $(tail -1 "$TMP/py_$sc" 2>/dev/null)"
         fi
     done
+    # Warnings explained (docs/reliability.md "Warnings"): the stability map's flexible needle in
+    # a 5 kPa gel inverts elements from step 59 on. Stopped at step 59, the end
+    # state (read for the result) holds the inversion: it affected the result. Stopped at step 70,
+    # the inversions have recovered before the end: none did.
+    for n in 59 70; do
+        "$BIN" run "$SRC/tools/stability.lua" --set youngs=5e3 --set needle=flexible --steps $n \
+            --no-render -o "$TMP/warn$n" --quiet >/dev/null 2>"$TMP/err_warn$n"
+        echo $? >"$TMP/rc_warn$n"
+    done
+    if [ "$(cat "$TMP/rc_warn59")$(cat "$TMP/rc_warn70")" = 00 ] &&
+        python3 - "$TMP/warn59/report.json" "$TMP/warn70/report.json" <<'PY' >"$TMP/py_warn" 2>&1; then
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+for r in (a, b):
+    w, x = r["warnings"], r["warnings_explained"]
+    assert x["see"] == "docs/reliability.md#warnings", x
+    for k in ("nan", "inverted", "unconverged", "lcp_unresolved"):
+        e = x[k]
+        assert e["count"] == w[k] and e["affected_result"] + e["did_not_affect_result"] == e["count"], (k, e)
+        assert e["steps"] <= e["count"] and (e["count"] == 0) == (e["most_in_a_step"] == 0), (k, e)
+        assert e["meaning"] and e["trust"], e
+    assert x["result_affected"] == any(x[k]["affected_result"] for k in w), x
+ia, ib = a["warnings_explained"]["inverted"], b["warnings_explained"]["inverted"]
+assert ia["count"] == ia["affected_result"] == ia["most_in_a_step"] >= 1, ia  # the last step's
+assert a["warnings_explained"]["result_affected"] is True
+assert ib["count"] > ia["count"] and ib["affected_result"] == 0 and ib["steps"] > 1, ib
+assert b["warnings_explained"]["result_affected"] is False
+print("at step 59, %d inverted in the end state; by step 70, %d over %d steps, all recovered"
+      % (ia["count"], ib["count"], ib["steps"]))
+PY
+        pass "warnings explained: $(cat "$TMP/py_warn")"
+    else
+        fail "warnings explained" "$(head -1 "$TMP/err_warn59") $(head -1 "$TMP/err_warn70") $(tail -1 "$TMP/py_warn")"
+    fi
     # Issue 38: a template and preloaded needles (act.needle): each needle through its hole,
     # its seeds left near the template's planned places; the log replays to the same state.
     TS="$SRC/tests/data/template_small.lua"
@@ -401,7 +435,7 @@ need = {
     "": ["schema", "scenario", "version", "steps", "sim_time_s", "wall_time_s", "step_ms",
          "stages_ms", "lcp_trials", "cg_iterations", "factorizations",
          "friction_consistent_fraction", "mesh",
-         "needle", "targets", "seeds", "obstacles", "score", "warnings", "events", "state_hash"],
+         "needle", "targets", "seeds", "obstacles", "score", "warnings", "warnings_explained", "events", "state_hash"],
     "step_ms": ["median", "mean", "p95", "max"],
     "stages_ms": ["total", "lcp", "tissue", "needle", "remesh"],
     "stages_mean_ms": ["total", "lcp", "tissue", "needle", "remesh"],
