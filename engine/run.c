@@ -704,6 +704,7 @@ void ns_run_free(NsRun *r)
     if (r->have_steer)
         ns_run_steer_free(&r->steer);
     ns_run_dosimetry_free(r);
+    ns_run_video_free(&r->cues);
     if (r->have_c)
         ns_coupled_free(&r->c);
     if (r->have_rod)

@@ -16,6 +16,7 @@
 #include "rod.h"
 #include "run_render.h"
 #include "run_spec.h"
+#include "run_video.h"
 #include "run_warnings.h"
 #include "scenario.h"
 #include "series.h"
@@ -175,6 +176,7 @@ typedef struct NsRun {
     NsRunSteer steer;
     bool have_steer;
     struct NsRunDose *dose; /* dosimetry = {...} (engine/run_dosimetry.c), or NULL */
+    NsRunCues cues;         /* the authored video's (engine/run_video.c) */
 } NsRun;
 
 enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT, EVENT_REENTRY };

@@ -196,6 +196,14 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
     snprintf(l3, sizeof l3, "score so far %.1f / 100   seeds %d of %d", res->total, r->seed_n,
              sp->seed_count);
     const char *hud[4] = {l0, l1, l2, l3};
+    if (rc == 0 && !caption) { /* the authored video's caption and camera (run_video.h) */
+        double t = (double)r->steps * sp->dt;
+        memcpy(r->rr.frame_views, r->rr.o.views, sizeof r->rr.frame_views);
+        r->rr.frame_nviews = r->rr.o.nviews;
+        ns_run_video_camera(&r->cues, t, ns_run_tip(r), &in, r->rr.frame_views,
+                            &r->rr.frame_nviews);
+        r->rr.caption = ns_run_video_caption(&r->cues, t);
+    }
     if (rc == 0)
         rc = caption ? ns_run_render_moment(&r->rr, &in, hud, 4, caption, final, err, err_sz)
                      : ns_run_render_frame(&r->rr, &in, hud, 4, err, err_sz);
@@ -251,6 +259,17 @@ int ns_run_render_after_step(NsRun *r, const NsCouplingStats *st, bool dropped, 
     }
     r->peak_axial = st->cutting ? fmax(r->peak_axial, f) : 0.0;
     bool frames = r->opt.frames || r->opt.video;
+    double slow = ns_run_video_slow(&r->cues, t);
+    if (frames && slow > 1.0) { /* slow motion: factor / every frames a step (run_video.h) */
+        r->cues.owed += slow / r->every;
+        long k = (long)r->cues.owed;
+        r->cues.owed -= (double)k;
+        if (k > 0 && (ns_run_render_now(r, NULL, false, NULL, err, err_sz) ||
+                      ns_run_render_repeat(&r->rr, k - 1, err, err_sz)))
+            return -1;
+        return 0;
+    }
+    r->cues.owed = 0.0;
     if (frames && r->steps % r->every == 0 && ns_run_render_now(r, NULL, false, NULL, err, err_sz))
         return -1;
     return 0;

@@ -1,6 +1,7 @@
 /* Frames, video and contact sheet of a run (run_render.h). */
 #include "run_render.h"
 
+#include "card.h"
 #include "cleanup.h"
 #include "out_files.h"
 
@@ -193,7 +194,7 @@ int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int
 
 static int push_timing(NsRunRender *rr, double render_ms, double encode_ms)
 {
-    if (rr->frame_count >= rr->timing_cap) {
+    if (rr->timed >= rr->timing_cap) {
         long cap = rr->timing_cap ? 2 * rr->timing_cap : 256;
         double *a = realloc(rr->render_ms, (size_t)cap * sizeof *a);
         if (a)
@@ -205,26 +206,19 @@ static int push_timing(NsRunRender *rr, double render_ms, double encode_ms)
             return -1;
         rr->timing_cap = cap;
     }
-    rr->render_ms[rr->frame_count] = render_ms;
-    rr->encode_ms[rr->frame_count] = encode_ms;
-    rr->frame_count++;
+    rr->render_ms[rr->timed] = render_ms;
+    rr->encode_ms[rr->timed] = encode_ms;
+    rr->timed++;
     return 0;
 }
 
-int ns_run_render_frame(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
-                        char *err, int err_sz)
+/* rr->image to the frames folder (its next number) and the video. */
+static int emit(NsRunRender *rr, char *err, int err_sz)
 {
-    if (!rr->o.frames && !rr->o.video)
-        return 0;
     if (rr->frame_count >= 1000000) {
         ns_set_err(err, err_sz, "more than 999,999 frames: give a larger --frame-every");
         return -1;
     }
-    double t0 = now_s();
-    if (ns_frame_render(&rr->frame, in, rr->o.views, rr->o.nviews, hud, nhud, rr->o.legend,
-                        &rr->image, err, err_sz))
-        return -1;
-    double t1 = now_s();
     if (rr->o.frames) {
         char name[32];
         snprintf(name, sizeof name, "%06ld.png", rr->frame_count);
@@ -237,6 +231,87 @@ int ns_run_render_frame(NsRunRender *rr, NsSceneInput *in, const char *const *hu
             return -1;
     }
     if (rr->video && ns_video_frame(rr->video, &rr->image, err, err_sz))
+        return -1;
+    rr->frame_count++;
+    return 0;
+}
+
+/* The authored video's fonts, opened at its first caption or card. */
+static int video_fonts(NsRunRender *rr, char *err, int err_sz)
+{
+    int h = rr->o.height;
+    if (!rr->caption_font)
+        rr->caption_font = ns_font_open(h / 24 < 12 ? 12 : h / 24, 0, err, err_sz);
+    if (rr->caption_font && !rr->title_font)
+        rr->title_font = ns_font_open(h / 12 < 16 ? 16 : h / 12, 0, err, err_sz);
+    return rr->title_font ? 0 : -1;
+}
+
+int ns_run_render_repeat(NsRunRender *rr, long n, char *err, int err_sz)
+{
+    for (long i = 0; i < n && (rr->o.frames || rr->video); i++)
+        if (emit(rr, err, err_sz))
+            return -1;
+    return 0;
+}
+
+int ns_run_render_card(NsRunRender *rr, const char *title, const char *text, long frames, char *err,
+                       int err_sz)
+{
+    if (!rr->o.frames && !rr->video)
+        return 0;
+    if (video_fonts(rr, err, err_sz))
+        return -1;
+    ns_card_title(&rr->image, rr->title_font, rr->caption_font, title, text);
+    return ns_run_render_repeat(rr, frames, err, err_sz);
+}
+
+int ns_run_render_chapter(NsRunRender *rr, const char *title, char *err, int err_sz)
+{
+    if (!rr->video)
+        return 0;
+    if (rr->chapters == rr->chapter_cap) {
+        int cap = rr->chapter_cap ? 2 * rr->chapter_cap : 8;
+        char **t = realloc(rr->chapter_title, (size_t)cap * sizeof *t);
+        if (t)
+            rr->chapter_title = t;
+        double *c = t ? realloc(rr->chapter_s, (size_t)cap * sizeof *c) : NULL;
+        if (c)
+            rr->chapter_s = c;
+        if (!t || !c) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        rr->chapter_cap = cap;
+    }
+    char *dup = strdup(title);
+    if (!dup) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    rr->chapter_title[rr->chapters] = dup;
+    rr->chapter_s[rr->chapters++] = (double)rr->frame_count / rr->o.fps;
+    return 0;
+}
+
+int ns_run_render_frame(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
+                        char *err, int err_sz)
+{
+    if (!rr->o.frames && !rr->o.video)
+        return 0;
+    double t0 = now_s();
+    const int *views = rr->frame_nviews > 0 ? rr->frame_views : rr->o.views;
+    int nviews = rr->frame_nviews > 0 ? rr->frame_nviews : rr->o.nviews;
+    if (ns_frame_render(&rr->frame, in, views, nviews, hud, nhud, rr->o.legend, &rr->image, err,
+                        err_sz))
+        return -1;
+    if (rr->caption && rr->caption[0]) {
+        if (video_fonts(rr, err, err_sz))
+            return -1;
+        ns_card_caption(&rr->image, rr->caption_font, rr->caption);
+    }
+    double t1 = now_s();
+    if (emit(rr, err, err_sz))
         return -1;
     double t2 = now_s();
     rr->render_s += t2 - t0;
@@ -335,6 +410,30 @@ static int write_sheet(NsRunRender *rr, const char *title, const char *const *ta
     return rc;
 }
 
+/* The finished video copied with its chapters, then put in its place (video_tmp). */
+static int video_chapters(NsRunRender *rr, char *err, int err_sz)
+{
+    rr->video_chap_tmp = dup_suffix(rr->o.video, ".chapters.part");
+    if (!rr->video_chap_tmp) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    if (ns_out_replaceable(rr->video_chap_tmp, "the video", err, err_sz) ||
+        ns_cleanup_add(rr->video_chap_tmp) != 0)
+        return -1;
+    ns_out_remove_old(rr->video_chap_tmp);
+    double end = (double)rr->frame_count / rr->o.fps;
+    int rc =
+        ns_video_chapters(rr->video_tmp, rr->video_chap_tmp, (const char *const *)rr->chapter_title,
+                          rr->chapter_s, rr->chapters, end, err, err_sz);
+    if (rc == 0 && rename(rr->video_chap_tmp, rr->video_tmp) != 0) {
+        ns_set_err(err, err_sz, "cannot write '%s': %s", rr->video_tmp, strerror(errno));
+        rc = -1;
+    }
+    ns_out_remove_part(rr->video_chap_tmp);
+    return rc;
+}
+
 int ns_run_render_finish(NsRunRender *rr, const char *title, const char *const *table, int rows,
                          const NsImage *chart, char *err, int err_sz)
 {
@@ -347,6 +446,8 @@ int ns_run_render_finish(NsRunRender *rr, const char *title, const char *const *
         if (ns_video_close(v, err, err_sz))
             return -1;
         rr->ffmpeg_cpu_s = children_cpu_s() - rr->children_cpu0;
+        if (rr->chapters > 0 && video_chapters(rr, err, err_sz))
+            return -1;
     }
     rr->render_s += now_s() - t0;
     return 0;
@@ -404,6 +505,8 @@ void ns_run_render_abort(NsRunRender *rr)
     }
     if (rr->video_tmp)
         ns_out_remove_part(rr->video_tmp);
+    if (rr->video_chap_tmp)
+        ns_out_remove_part(rr->video_chap_tmp);
     if (rr->summary_tmp)
         ns_out_remove_part(rr->summary_tmp);
     if (rr->frames_tmp) {
@@ -428,6 +531,13 @@ void ns_run_render_free(NsRunRender *rr)
     free(rr->summary_path);
     free(rr->render_ms);
     free(rr->encode_ms);
+    for (int i = 0; i < rr->chapters; i++)
+        free(rr->chapter_title[i]);
+    free(rr->chapter_title);
+    free(rr->chapter_s);
+    free(rr->video_chap_tmp);
+    ns_font_close(rr->caption_font);
+    ns_font_close(rr->title_font);
     memset(rr, 0, sizeof *rr);
 }
 
@@ -453,6 +563,6 @@ static double median(const double *v, long n)
 
 void ns_run_render_medians(const NsRunRender *rr, double *render_ms, double *encode_ms)
 {
-    *render_ms = median(rr->render_ms, rr->frame_count);
-    *encode_ms = median(rr->encode_ms, rr->frame_count);
+    *render_ms = median(rr->render_ms, rr->timed);
+    *encode_ms = median(rr->encode_ms, rr->timed);
 }

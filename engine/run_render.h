@@ -42,6 +42,16 @@ typedef struct NsRunRender {
     double render_s; /* all rendering and encoding, moments and sheet included [s] */
     double children_cpu0, ffmpeg_cpu_s; /* ffmpeg's CPU time (it encodes on another core) */
     int committed; /* bits: frames (1), video (2), sheet (4) renamed into place */
+    long timed;    /* frames rendered (render_ms, encode_ms); frame_count counts repeats too */
+    /* an authored video (engine/run_video.c): the caption of the next frames (NULL: none), the
+     * chapters' titles and starts in the video [s] */
+    const char *caption;
+    int frame_views[3], frame_nviews; /* the next frames' views (0: o.views) */
+    NsFont *caption_font, *title_font;
+    char **chapter_title;
+    double *chapter_s;
+    int chapters, chapter_cap;
+    char *video_chap_tmp; /* the video with its chapters, before it replaces video_tmp */
 } NsRunRender;
 
 /* Before a run writes anything in out_dir: an earlier summary.png must be a regular file and
@@ -54,6 +64,14 @@ int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int
 /* A frame of the run to the frames folder and the video. */
 int ns_run_render_frame(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,
                         char *err, int err_sz);
+/* The last frame again, n times, to the frames folder and the video (slow motion). */
+int ns_run_render_repeat(NsRunRender *rr, long n, char *err, int err_sz);
+/* A title card (render/card.h) as `frames` frames of the frames folder and the video. */
+int ns_run_render_card(NsRunRender *rr, const char *title, const char *text, long frames, char *err,
+                       int err_sz);
+/* A chapter of the video, titled title, from the next frame on (ffmpeg's chapter metadata,
+ * added when the video is finished). */
+int ns_run_render_chapter(NsRunRender *rr, const char *title, char *err, int err_sz);
 /* A key moment for the contact sheet (the last of NS_RUN_MOMENTS slots is kept for the end:
  * later moments past the others are dropped, `final` always replaces the last). */
 int ns_run_render_moment(NsRunRender *rr, NsSceneInput *in, const char *const *hud, int nhud,

@@ -82,11 +82,17 @@ static int start_body(lua_State *L)
     set_num(L, lua_gettop(L), "twist_rate", 0.0);
     lua_rawset(L, -3);
     lua_pushstring(L, "limits"); /* the controls' bounds (sim/ns_limits.h) */
-    lua_createtable(L, 0, 4);
+    lua_createtable(L, 0, 10);
     set_num(L, lua_gettop(L), "insert_speed", NS_LIMIT_INSERT_SPEED);
     set_num(L, lua_gettop(L), "twist_rate", NS_LIMIT_TWIST_RATE);
     set_num(L, lua_gettop(L), "base_speed", NS_LIMIT_BASE_SPEED);
     set_num(L, lua_gettop(L), "twist_angle", NS_LIMIT_TWIST_ANGLE);
+    set_num(L, lua_gettop(L), "video_text", NS_LIMIT_VIDEO_TEXT); /* the video's cues */
+    set_num(L, lua_gettop(L), "video_duration", NS_LIMIT_VIDEO_DURATION);
+    set_num(L, lua_gettop(L), "video_card", NS_LIMIT_VIDEO_CARD_S);
+    set_num(L, lua_gettop(L), "video_slow", NS_LIMIT_VIDEO_SLOW);
+    set_num(L, lua_gettop(L), "video_zoom", NS_LIMIT_VIDEO_ZOOM);
+    set_num(L, lua_gettop(L), "video_orbit", NS_LIMIT_VIDEO_ORBIT);
     lua_rawset(L, -3);
     lua_pushstring(L, "entry"); /* the scenario's entry: the first needle's (act.needle) */
     lua_createtable(L, 0, 2);
@@ -292,15 +298,14 @@ static int read_controls(lua_State *L, TickIO *io, int ci)
         int ty = get_raw(L, ci, keys[k]);
         double v = lua_tonumber(L, -1);
         if (ty != LUA_TNUMBER || !isfinite(v))
-            return luaL_error(L, "%s: sim.control.%s must be a finite number (got %s)", r->sc.path,
-                              keys[k],
+            return luaL_error(L, "sim.control.%s must be a finite number (got %s)", keys[k],
                               ty == LUA_TNUMBER ? "a non-finite number" : luaL_typename(L, -1));
         double lim = k == 0 ? NS_LIMIT_INSERT_SPEED : NS_LIMIT_TWIST_RATE;
         if (fabs(v) > lim) {
             char buf[160]; /* (lua_pushfstring knows no %g) */
             snprintf(buf, sizeof buf, "sim.control.%s %g is beyond its limit of %g %s", keys[k], v,
                      lim, k == 0 ? "m/s" : "rad/s");
-            return luaL_error(L, "%s: %s", r->sc.path, buf);
+            return luaL_error(L, "%s", buf);
         }
         *dst[k] = v;
         lua_pop(L, 1);
@@ -320,9 +325,9 @@ static int read_controls(lua_State *L, TickIO *io, int ci)
     }
     if (bt != LUA_TTABLE && bt != LUA_TNIL)
         return luaL_error(L,
-                          "%s: sim.control.base_velocity must be {vx, vy, vz}: 3 finite "
+                          "sim.control.base_velocity must be {vx, vy, vz}: 3 finite "
                           "numbers within +-%d mm/s, or nil",
-                          r->sc.path, (int)(1e3 * NS_LIMIT_BASE_SPEED));
+                          (int)(1e3 * NS_LIMIT_BASE_SPEED));
     memcpy(io->ctl.v_base, vb, sizeof vb);
     lua_pop(L, 1);
     /* act.next_needle{} leaves the new entry, checked by the action: {point, direction,
@@ -344,15 +349,14 @@ static int read_controls(lua_State *L, TickIO *io, int ci)
             }
             if (ty == LUA_TTABLE && !ok)
                 return luaL_error(L,
-                                  "%s: sim.control.next_needle.%s must be {x, y, z}: three "
+                                  "sim.control.next_needle.%s must be {x, y, z}: three "
                                   "finite numbers",
-                                  r->sc.path, keys3[k]);
+                                  keys3[k]);
             if (ty == LUA_TTABLE)
                 lua_pop(L, 3);
             lua_pop(L, 1);
             if (k < 2 && ty != LUA_TTABLE)
-                return luaL_error(L, "%s: sim.control.next_needle.%s must be {x, y, z}", r->sc.path,
-                                  keys3[k]);
+                return luaL_error(L, "sim.control.next_needle.%s must be {x, y, z}", keys3[k]);
         }
         io->ctl.next_needle = 1;
     }
@@ -360,6 +364,8 @@ static int read_controls(lua_State *L, TickIO *io, int ci)
     lua_pushstring(L, "next_needle");
     lua_pushnil(L);
     lua_rawset(L, ci);
+    /* the video's cues (act.caption, ...): not controls, and not in a recorded log */
+    ns_run_video_take(&r->cues, r->rendering ? &r->rr : NULL, L, ci, io->t, io->view == NULL);
     /* act.drop_seed{} raises a one-shot flag */
     io->ctl.drop_seed = get_raw(L, ci, "drop_seed") != LUA_TNIL && lua_toboolean(L, -1);
     lua_pop(L, 1);
@@ -419,7 +425,7 @@ static int tick_body(lua_State *L)
         resume_script(L, io);
     lua_pushstring(L, "control");
     if (lua_rawget(L, si) != LUA_TTABLE)
-        return luaL_error(L, "%s: sim.control must stay a table", r->sc.path);
+        return luaL_error(L, "sim.control must stay a table");
     int ci = lua_gettop(L);
     if (io->given && !io->more) { /* the trainee drives */
         r->live_scripted = false;

@@ -151,6 +151,13 @@ void ns_scene_camera(const NsSceneInput *in, NsView v, double aspect, NsCamera *
         }
         if (normalize(f) < 1e-9)
             any_normal(a, f);
+        if (in->orbit_deg != 0.0) { /* f turned about a (f is normal to a) */
+            double g[3], c = cos(in->orbit_deg * M_PI / 180.0),
+                         sn = sin(in->orbit_deg * M_PI / 180.0);
+            cross(a, f, g);
+            for (int i = 0; i < 3; i++)
+                f[i] = c * f[i] + sn * g[i];
+        }
         cross(a, f, u);
         normalize(u);
     }

@@ -81,7 +81,8 @@ typedef struct NsSceneInput {
     double bounds[6];         /* lo[3], hi[3]: what the camera frames (the initial tissue) */
     bool has_cut_normal;      /* the scenario's cut-plane normal instead of the default */
     double cut_normal[3];
-    bool tet_edges; /* draw the tets' edges on the cut face */
+    bool tet_edges;   /* draw the tets' edges on the cut face */
+    double orbit_deg; /* the side and top views turned about the insertion axis (0: none) */
     /* isodose lines on the cut face (docs/brachytherapy.md): dose_points fills out[k] with the
      * dose [Gy] at pts[3k..3k+2] from seeds at seed_x (returns 0, else no lines); levels [Gy]
      * drawn with the colours of ns_scene_iso_rgb. NULL: none. */

@@ -100,6 +100,49 @@ static void video_free(NsVideo *v)
     free(v);
 }
 
+/* Starts exe with argv: its stdin a pipe (v->fd, the write end), stdout /dev/null, stderr an
+ * unlinked temporary file (v->log_fd). Returns 0, or -1 with a message. */
+static int spawn(NsVideo *v, const char *exe, char *const argv[], char *err, int err_sz)
+{
+    const char *tmpdir = getenv("TMPDIR");
+    char log_path[PATH_MAX];
+    snprintf(log_path, sizeof log_path, "%s/needlesim-ffmpeg-XXXXXX",
+             tmpdir && *tmpdir ? tmpdir : "/tmp");
+    v->log_fd = mkostemp(log_path, O_CLOEXEC);
+    if (v->log_fd < 0) {
+        snprintf(err, err_sz, "cannot create a temporary file for ffmpeg's messages in %s: %s",
+                 tmpdir && *tmpdir ? tmpdir : "/tmp", strerror(errno));
+        return -1;
+    }
+    unlink(log_path);
+    int pfd[2];
+    if (pipe2(pfd, O_CLOEXEC) != 0) {
+        snprintf(err, err_sz, "cannot create a pipe to ffmpeg: %s", strerror(errno));
+        return -1;
+    }
+    pid_t pid = fork();
+    if (pid < 0) {
+        snprintf(err, err_sz, "cannot start ffmpeg: fork: %s", strerror(errno));
+        close(pfd[0]);
+        close(pfd[1]);
+        return -1;
+    }
+    if (pid == 0) { /* child: async-signal-safe calls only */
+        int null_fd = open("/dev/null", O_WRONLY);
+        if (dup2(pfd[0], 0) < 0 || null_fd < 0 || dup2(null_fd, 1) < 0 || dup2(v->log_fd, 2) < 0)
+            _exit(127);
+        execv(exe, argv);
+        static const char msg[] = "needlesim: cannot execute ffmpeg\n";
+        ssize_t ignored = write(2, msg, sizeof msg - 1);
+        (void)ignored;
+        _exit(127);
+    }
+    close(pfd[0]);
+    v->fd = pfd[1];
+    v->pid = pid;
+    return 0;
+}
+
 NsVideo *ns_video_open(const char *path, int w, int h, double fps, char *err, int err_sz)
 {
     if (w < 2 || h < 2 || w > 16384 || h > 16384 || w % 2 || h % 2) {
@@ -125,24 +168,6 @@ NsVideo *ns_video_open(const char *path, int w, int h, double fps, char *err, in
     v->fd = v->log_fd = -1;
     v->w = w;
     v->h = h;
-    const char *tmpdir = getenv("TMPDIR");
-    char log_path[PATH_MAX];
-    snprintf(log_path, sizeof log_path, "%s/needlesim-ffmpeg-XXXXXX",
-             tmpdir && *tmpdir ? tmpdir : "/tmp");
-    v->log_fd = mkostemp(log_path, O_CLOEXEC);
-    if (v->log_fd < 0) {
-        snprintf(err, err_sz, "cannot create a temporary file for ffmpeg's messages in %s: %s",
-                 tmpdir && *tmpdir ? tmpdir : "/tmp", strerror(errno));
-        video_free(v);
-        return NULL;
-    }
-    unlink(log_path);
-    int pfd[2];
-    if (pipe2(pfd, O_CLOEXEC) != 0) {
-        snprintf(err, err_sz, "cannot create a pipe to ffmpeg: %s", strerror(errno));
-        video_free(v);
-        return NULL;
-    }
     char size[32], rate[32];
     snprintf(size, sizeof size, "%dx%d", w, h);
     snprintf(rate, sizeof rate, "%.9g", fps);
@@ -151,27 +176,10 @@ NsVideo *ns_video_open(const char *path, int w, int h, double fps, char *err, in
                     "-i",         "-",     "-an",       "-c:v",       "libx264", "-preset",
                     "veryfast",   "-crf",  "23",        "-pix_fmt",   "yuv420p", "-movflags",
                     "+faststart", "-f",    "mp4",       (char *)path, NULL};
-    pid_t pid = fork();
-    if (pid < 0) {
-        snprintf(err, err_sz, "cannot start ffmpeg: fork: %s", strerror(errno));
-        close(pfd[0]);
-        close(pfd[1]);
+    if (spawn(v, exe, argv, err, err_sz)) {
         video_free(v);
         return NULL;
     }
-    if (pid == 0) { /* child: async-signal-safe calls only */
-        int null_fd = open("/dev/null", O_WRONLY);
-        if (dup2(pfd[0], 0) < 0 || null_fd < 0 || dup2(null_fd, 1) < 0 || dup2(v->log_fd, 2) < 0)
-            _exit(127);
-        execv(exe, argv);
-        static const char msg[] = "needlesim: cannot execute ffmpeg\n";
-        ssize_t ignored = write(2, msg, sizeof msg - 1);
-        (void)ignored;
-        _exit(127);
-    }
-    close(pfd[0]);
-    v->fd = pfd[1];
-    v->pid = pid;
     return v;
 }
 
@@ -262,4 +270,66 @@ void ns_video_abort(NsVideo *v)
         kill(v->pid, SIGKILL);
     reap(v);
     video_free(v);
+}
+
+/* Appends s to the ffmetadata text at *at, escaping what the format gives a meaning to ('=',
+ * ';', '#', '\' and newlines, each after a backslash); other control bytes become spaces. */
+static void meta_put(char *buf, size_t cap, size_t *at, const char *s)
+{
+    for (; *s && *at + 3 < cap; s++) {
+        char c = *s;
+        if (c == '=' || c == ';' || c == '#' || c == '\\' || c == '\n')
+            buf[(*at)++] = '\\';
+        buf[(*at)++] = (unsigned char)c < 0x20 && c != '\n' ? ' ' : c;
+    }
+    buf[*at] = '\0';
+}
+
+int ns_video_chapters(const char *in, const char *out, const char *const *titles,
+                      const double *start_s, int n, double end_s, char *err, int err_sz)
+{
+    char exe[PATH_MAX];
+    if (!find_on_path("ffmpeg", exe, sizeof exe)) {
+        snprintf(err, err_sz, "chapters need the ffmpeg program (apt install ffmpeg)");
+        return -1;
+    }
+    size_t cap = 256 + (size_t)n * 1200, at = 0;
+    char *meta = malloc(cap);
+    NsVideo *v = meta ? calloc(1, sizeof *v) : NULL;
+    if (!v) {
+        free(meta);
+        snprintf(err, err_sz, "out of memory for the video's chapters");
+        return -1;
+    }
+    v->fd = v->log_fd = -1;
+    at = (size_t)snprintf(meta, cap, ";FFMETADATA1\n");
+    for (int i = 0; i < n; i++) {
+        long a = lround(1e3 * start_s[i]), b = lround(1e3 * (i + 1 < n ? start_s[i + 1] : end_s));
+        at += (size_t)snprintf(meta + at, cap - at,
+                               "[CHAPTER]\nTIMEBASE=1/1000\nSTART=%ld\nEND=%ld\ntitle=", a,
+                               b > a ? b : a + 1);
+        meta_put(meta, cap, &at, titles[i]);
+        at += (size_t)snprintf(meta + at, cap - at, "\n");
+    }
+    char *argv[] = {"ffmpeg",   "-y",  "-loglevel",     "error",     "-i",
+                    (char *)in, "-f",  "ffmetadata",    "-i",        "-",
+                    "-map",     "0",   "-map_metadata", "1",         "-map_chapters",
+                    "1",        "-c",  "copy",          "-movflags", "+faststart",
+                    "-f",       "mp4", (char *)out,     NULL};
+    int rc = spawn(v, exe, argv, err, err_sz);
+    int e = rc == 0 ? write_all_nosigpipe(v->fd, (const uint8_t *)meta, at) : 0;
+    free(meta);
+    if (v->fd >= 0) {
+        close(v->fd);
+        v->fd = -1;
+    }
+    reap(v);
+    char line[512];
+    if (rc == 0 && (e || !WIFEXITED(v->status) || WEXITSTATUS(v->status) != 0)) {
+        snprintf(err, err_sz, "ffmpeg could not add the chapters: %s",
+                 e ? strerror(e) : last_log_line(v, line, sizeof line));
+        rc = -1;
+    }
+    video_free(v);
+    return rc;
 }

@@ -28,4 +28,11 @@ int ns_video_close(NsVideo *v, char *err, int err_sz);
  * file. */
 void ns_video_abort(NsVideo *v);
 
+/* Copies the MP4 at in to out (streams copied, not encoded again) with n chapters: chapter i
+ * titled titles[i] from start_s[i] to the next one's start (the last to end_s) [s], in
+ * ffmpeg's metadata format through its stdin. Returns 0, or -1 with ffmpeg's last error line
+ * (the caller removes out). */
+int ns_video_chapters(const char *in, const char *out, const char *const *titles,
+                      const double *start_s, int n, double end_s, char *err, int err_sz);
+
 #endif

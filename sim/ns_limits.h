@@ -81,6 +81,16 @@
 #define NS_LIMIT_DOSE_SPACING_MAX  5e-3
 /* A dosimetry table (the assets/tg43 CSV files) [bytes]: the 6711 table is ~4 kB. */
 #define NS_LIMIT_DOSE_TABLE_BYTES ((long long)1 << 20)
+/* An authored video's cues (engine/run_video.c; scripts/needlesim/actions.lua checks the
+ * same): cues in a run, bytes of a caption's, chapter's or card's text, a caption's or camera
+ * move's duration [s], a card's [s], the slow-motion factor, the camera's zoom, its orbit [deg]. */
+#define NS_LIMIT_VIDEO_CUES     1000
+#define NS_LIMIT_VIDEO_TEXT     200
+#define NS_LIMIT_VIDEO_DURATION 600.0
+#define NS_LIMIT_VIDEO_CARD_S   10.0
+#define NS_LIMIT_VIDEO_SLOW     16.0
+#define NS_LIMIT_VIDEO_ZOOM     20.0
+#define NS_LIMIT_VIDEO_ORBIT    720.0
 
 /* ---- meshes ------------------------------------------------------------------------------- */
 

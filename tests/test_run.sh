@@ -213,6 +213,82 @@ PY
     else
         fail "warnings explained" "$(head -1 "$TMP/err_warn59") $(head -1 "$TMP/err_warn70") $(tail -1 "$TMP/py_warn")"
     fi
+    # Issue 39: an authored video. Its cues change the pictures, never the physics: the same
+    # state hash with --no-render; the chapters where the script put them (titles escaped for
+    # ffmpeg's metadata); the title card on screen first; bad cues refused. Then the lesson: a
+    # video of at least a minute in at least three chapters, the same hash without pictures.
+    # video_pair NAME SCENARIO: NAME0 with --no-render, NAME1 with a 320x180 NAME1/video.mp4;
+    # the first error line of each in err_NAME.
+    video_pair() {
+        "$BIN" run "$2" --no-render -o "$TMP/${1}0" --quiet >/dev/null 2>"$TMP/err_$1" &&
+            "$BIN" run "$2" -o "$TMP/${1}1" --video "$TMP/${1}1/video.mp4" --width 320 \
+                --height 180 --quiet >/dev/null 2>>"$TMP/err_$1"
+    }
+    VC="$SRC/tests/data/video_cues.lua"
+    if video_pair vc "$VC" && python3 - "$TMP/vc0" "$TMP/vc1" <<'PY' >"$TMP/py_vc" 2>&1; then
+import json, subprocess, sys
+a, b = (json.load(open(d + "/report.json")) for d in sys.argv[1:3])
+assert a["state_hash"] == b["state_hash"], (a["state_hash"], b["state_hash"])
+mp4 = sys.argv[2] + "/video.mp4"
+ch = json.loads(subprocess.run(["ffprobe", "-v", "error", "-show_chapters", "-of", "json", mp4],
+                               capture_output=True, check=True).stdout)["chapters"]
+titles = [c["tags"]["title"] for c in ch]
+assert titles == ["In", "Turn; = # \\ escaped", "On"], titles
+starts = [float(c["start_time"]) for c in ch]
+frames, fps = b["render"]["frames"], 25.0
+# the card (1 s: 25 frames) after the first frame; the first chapter from 0 (an MP4's chapters
+# cover the whole video); each later one where the script reached it, in order, the last one
+# ending with the video
+assert starts[0] == 0 and 26 / fps < starts[1] < starts[2] < frames / fps, starts
+assert abs(float(ch[-1]["end_time"]) - frames / fps) < 1e-3, (ch[-1], frames)
+# the title card: the frame at 0.5 s is the card's dark background, almost everywhere
+raw = subprocess.run(["ffmpeg", "-v", "error", "-ss", "0.5", "-i", mp4, "-frames:v", "1", "-f",
+                      "rawvideo", "-pix_fmt", "rgb24", "-"], capture_output=True, check=True).stdout
+assert len(raw) == 320 * 180 * 3, len(raw)
+dark = sum(1 for i in range(0, len(raw), 3) if max(raw[i:i + 3]) < 50) / (320 * 180)
+assert dark > 0.9, dark
+print("same hash, %d frames, chapters at %s s, the card %.0f %% dark" % (
+    frames, ", ".join("%.2f" % s for s in starts), 100 * dark))
+PY
+        pass "video cues: $(cat "$TMP/py_vc")"
+    else
+        fail "video cues" "$(head -1 "$TMP/err_vc") $(tail -1 "$TMP/py_vc" 2>/dev/null)"
+    fi
+    # refused NAME MESSAGE SCENARIO [ARGS...]: exit 1, the message, no report.
+    refused() {
+        local name=$1 msg=$2 sc=$3
+        shift 3
+        "$BIN" run "$sc" "$@" --no-render -o "$TMP/o_$name" --quiet >/dev/null 2>"$TMP/err_$name"
+        local rc=$?
+        if [ $rc = 1 ] && grep -qF -- "$msg" "$TMP/err_$name" && [ ! -e "$TMP/o_$name/report.json" ]; then
+            pass "$name: exit 1, $(head -c 160 "$TMP/err_$name")"
+        else
+            fail "$name" "exit $rc: $(head -1 "$TMP/err_$name")"
+        fi
+    }
+    bad_cue() { refused "cue_$1" "$2" "$VC" --set bad="$1"; }
+    bad_cue caption_text "video_cues.lua:9: act.caption: text must be a non-empty string"
+    bad_cue slow_factor "video_cues.lua:10: act.slow_motion: factor must be a number in [1, 16]"
+    bad_cue camera_view "video_cues.lua:11: act.camera: view 1 must be \"side\", \"top\" or \"axis\""
+    bad_cue card_long "video_cues.lua:12: act.card: title must be a non-empty string of at most 200 bytes (got 201 bytes)"
+    bad_cue chapter_field "video_cues.lua:13: act.chapter: unknown field 'at'"
+    bad_cue raw_kind "video_cues.lua: sim.control.video[1].kind must be \"caption\""
+    if video_pair ls "$SRC/scenarios/lesson_bevel_steering.lua" &&
+        python3 - "$TMP/ls0" "$TMP/ls1" <<'PY' >"$TMP/py_ls" 2>&1; then
+import json, subprocess, sys
+a, b = (json.load(open(d + "/report.json")) for d in sys.argv[1:3])
+assert a["state_hash"] == b["state_hash"], (a["state_hash"], b["state_hash"])
+out = json.loads(subprocess.run(["ffprobe", "-v", "error", "-show_chapters", "-show_format", "-of",
+                                 "json", sys.argv[2] + "/video.mp4"], capture_output=True,
+                                check=True).stdout)
+n, d = len(out["chapters"]), float(out["format"]["duration"])
+assert n >= 3 and 60 <= d <= 120, (n, d)
+print("%d chapters, %.1f s, the same state hash" % (n, d))
+PY
+        pass "lesson_bevel_steering: $(cat "$TMP/py_ls")"
+    else
+        fail "lesson_bevel_steering" "$(head -1 "$TMP/err_ls") $(tail -1 "$TMP/py_ls" 2>/dev/null)"
+    fi
     # Issue 38: a template and preloaded needles (act.needle): each needle through its hole,
     # its seeds left near the template's planned places; the log replays to the same state.
     TS="$SRC/tests/data/template_small.lua"
@@ -240,13 +316,7 @@ PY
     fi
     bad_needle() { # name, sed expression, expected message
         sed "$2" "$TS" >"$TMP/$1.lua"
-        "$BIN" run "$TMP/$1.lua" --no-render -o "$TMP/o_$1" --quiet >/dev/null 2>"$TMP/err_$1"
-        rc=$?
-        if [ $rc = 1 ] && grep -qF -- "$3" "$TMP/err_$1" && [ ! -e "$TMP/o_$1/report.json" ]; then
-            pass "$1: exit 1, $(head -c 160 "$TMP/err_$1")"
-        else
-            fail "$1" "exit $rc: $(head -1 "$TMP/err_$1")"
-        fi
+        refused "$1" "$3" "$TMP/$1.lua"
     }
     bad_needle needle_hole 's/hole = "c2", depth/hole = "d9", depth/' \
         "needle_hole.lua:50: act.needle: 'hole' must name a hole of the template (got d9; holes a1 to c2)"

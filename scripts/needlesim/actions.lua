@@ -656,6 +656,110 @@ function act._plan(t)
         clearance = f.clearance, tolerance = tol, seed = f.seed }
 end
 
+-- ---- the video's voice (docs/rendering.md "Authored videos") ----
+-- These change the pictures of a run with --video (or --frames), never the physics: they queue
+-- a cue for the engine and return at once, taking no simulated time, so a run's state hash is
+-- the same with them, without them and with --no-render.
+
+local function cue(c)
+    local q = sim.control.video
+    if type(q) ~= "table" then
+        q = {}
+        sim.control.video = q
+    end
+    q[#q + 1] = c
+end
+
+local function text(t, name, k, optional)
+    local v = t[k]
+    if v == nil and optional then
+        return nil
+    end
+    if type(v) ~= "string" or #v == 0 or #v > sim.limits.video_text or v:find("\0", 1, true) then
+        error(fmt("act.%s: %s must be a non-empty string of at most %d bytes (got %s)", name, k,
+            sim.limits.video_text, type(v) == "string" and fmt("%d bytes", #v) or type(v)), 3)
+    end
+    return v
+end
+
+local function within(lo, hi)
+    return function(x) return x >= lo and x <= hi end
+end
+
+-- A field in [lo, hi] (hi a name in sim.limits or a number), its unit in the message.
+local function ranged(t, name, k, lo, hi, unit, default)
+    hi = type(hi) == "string" and sim.limits[hi] or hi
+    local v = number(t, name, k, within(lo, hi), fmt("in [%g, %g]%s", lo, hi, unit), default, 4)
+    return v -- (not a tail call: the error's level counts this function)
+end
+
+--- act.caption{text, duration}: `text` on screen for the next `duration` [s] of simulated time
+-- (a later caption replaces it).
+function act.caption(t)
+    running()
+    fields(t, "caption", { "text", "duration" })
+    cue { kind = "caption", text = text(t, "caption", "text"),
+        duration = ranged(t, "caption", "duration", 1e-3, "video_duration", " [s]") }
+end
+
+--- act.chapter{title}: a chapter of the video, titled `title`, starts here (an MP4 chapter).
+function act.chapter(t)
+    running()
+    fields(t, "chapter", { "title" })
+    cue { kind = "chapter", title = text(t, "chapter", "title") }
+end
+
+--- act.slow_motion{factor, duration}: the next `duration` [s] of simulated time shown `factor`
+-- times slower (more frames a simulated second).
+function act.slow_motion(t)
+    running()
+    fields(t, "slow_motion", { "factor", "duration" })
+    cue { kind = "slow_motion", factor = ranged(t, "slow_motion", "factor", 1, "video_slow", ""),
+        duration = ranged(t, "slow_motion", "duration", 1e-3, "video_duration", " [s]") }
+end
+
+--- act.camera{view | views, zoom, orbit, duration}: the video's views from here ("side", "top",
+-- "axis", or a list of up to three side by side), zoomed `zoom` times about the needle tip and
+-- turned `orbit` degrees more about the insertion axis (side and top views), reached over
+-- `duration` [s] of simulated time (default 0: at once).
+function act.camera(t)
+    running()
+    fields(t, "camera", { "view", "views", "zoom", "orbit", "duration" })
+    local views = t.views
+    if t.view ~= nil then
+        if views ~= nil then
+            error("act.camera: give `view` or `views`, not both", 2)
+        end
+        views = { t.view }
+    end
+    if views ~= nil then
+        if type(views) ~= "table" or #views < 1 or #views > 3 then
+            error("act.camera: views must list one to three view names", 2)
+        end
+        for i, v in ipairs(views) do
+            if v ~= "side" and v ~= "top" and v ~= "axis" then
+                error(fmt("act.camera: view %d must be \"side\", \"top\" or \"axis\" (got %s)", i,
+                    tostring(v)), 2)
+            end
+        end
+    end
+    local zmax, omax = sim.limits.video_zoom, sim.limits.video_orbit
+    cue { kind = "camera", views = views,
+        zoom = t.zoom ~= nil and ranged(t, "camera", "zoom", 1 / zmax, zmax, "") or nil,
+        orbit = t.orbit ~= nil and ranged(t, "camera", "orbit", -omax, omax, " [deg]") or nil,
+        duration = ranged(t, "camera", "duration", 0, "video_duration", " [s]", 0) }
+end
+
+--- act.card{title, text, duration}: a title card (the title, `text` below it) for `duration`
+-- [s] of the video (default 3), the simulation paused meanwhile: a lesson's opening and
+-- closing.
+function act.card(t)
+    running()
+    fields(t, "card", { "title", "text", "duration" })
+    cue { kind = "card", title = text(t, "card", "title"), text = text(t, "card", "text", true),
+        duration = ranged(t, "card", "duration", 0.1, "video_card", " [s]", 3) }
+end
+
 -- For the engine: binds the run's `sim` table and returns the script's coroutine (nil without
 -- a script), which the engine resumes once per time step before the solver steps.
 function act._bind(s, script)
