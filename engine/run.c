@@ -294,6 +294,60 @@ int ns_run_next_needle(NsRun *r, const NsEntry *e, double t, char *err, int err_
 
 /* ---- seeds and obstacles ---- */
 
+/* Inverted tets beside the world point p (sharing a node with the tet p lies in, whose nodes
+ * a reading at p interpolates; run_warnings.h), found from the world positions' signed
+ * volumes. 0 outside the tissue, and at once when the latest step inverted none. */
+static int inverted_beside(NsRun *r, const double p[3], int *hint)
+{
+    if (r->warn.last[NS_WARN_INVERTED] == 0)
+        return 0;
+    const NsMesh *M = &r->tissue.mesh;
+    int tet = ns_mesh_locate_in(M, M->x, p, *hint, 1e-6, NULL);
+    if (tet < 0)
+        return 0;
+    *hint = tet;
+    enum { SEEN = 512 };
+    int seen[SEEN], ns = 0, n = 0;
+    for (int a = 0; a < 4; a++) {
+        const NsIntList *l = &M->node_tets[M->tet_node[4 * tet + a]];
+        for (int i = 0; i < l->count; i++) {
+            int e = l->items[i], dup = 0;
+            for (int j = 0; j < ns && !dup; j++)
+                dup = seen[j] == e;
+            if (dup)
+                continue;
+            if (ns < SEEN)
+                seen[ns++] = e;
+            const int *tn = M->tet_node + 4 * e;
+            n += ns_tet_volume(M->x + 3 * tn[0], M->x + 3 * tn[1], M->x + 3 * tn[2],
+                               M->x + 3 * tn[3]) <= 0.0;
+        }
+    }
+    return n;
+}
+
+/* The final state's readings (run_warnings.h): the tip, the targets, the seeds. */
+static void read_final(NsRun *r)
+{
+    const NsRunSpec *sp = &r->spec;
+    const NsMesh *M = &r->tissue.mesh;
+    int h = r->tip_hint;
+    int n = inverted_beside(r, ns_run_tip(r), &h);
+    for (int i = 0; i < sp->target_count; i++) {
+        double x[3];
+        int th = r->target_hint[i];
+        if (ns_run_world_of(M, sp->targets[i].at, &th, x) == 0)
+            n += inverted_beside(r, x, &th);
+    }
+    for (int k = 0; k < r->seed_n; k++) {
+        double x[3];
+        int sh = r->seeds[k].hint;
+        if (ns_run_world_of(M, r->seeds[k].u, &sh, x) == 0)
+            n += inverted_beside(r, x, &sh);
+    }
+    ns_run_warnings_read(&r->warn, n);
+}
+
 /* Releases a seed at the needle tip: the tissue's material point there, which the tissue then
  * carries (a seed is far smaller than an element and is not modelled as a body). The i-th
  * seed released takes the seed plan's i-th target; beyond the plan, the nearest target at the
@@ -318,7 +372,8 @@ int ns_run_release_seed(NsRun *r, double t, char *err, int err_sz)
         return -1;
     }
     r->tip_hint = tet;
-    ns_run_warnings_read(&r->warn); /* the seed's material point */
+    int h = tet;
+    ns_run_warnings_read(&r->warn, inverted_beside(r, ns_run_tip(r), &h)); /* its material point */
     if (r->seed_n == r->seed_cap) {
         int cap = r->seed_cap ? 2 * r->seed_cap : 16;
         struct Seed *sd = realloc(r->seeds, (size_t)cap * sizeof *sd);
@@ -574,8 +629,10 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
     bool inside = false;
     for (int k = 0; k < sp->obstacle_count; k++)
         inside |= r->obst[k].inside;
-    if (inside || r->event_n > events)
-        ns_run_warnings_read(&r->warn);
+    if (inside || r->event_n > events) {
+        int h = r->tip_hint;
+        ns_run_warnings_read(&r->warn, inverted_beside(r, tip, &h));
+    }
     if (r->rendering && ns_run_render_after_step(r, &st, ctl.drop_seed, err, err_sz))
         return -1;
     return 0;
@@ -670,7 +727,7 @@ int ns_run_load(NsRun *r, char *err, int err_sz)
 int ns_run_end(NsRun *r, NsRunResults *res, uint64_t *hash, char *err, int err_sz)
 {
     int rc = 0;
-    ns_run_warnings_read(&r->warn); /* the targets, the seeds, the dose */
+    read_final(r); /* the targets, the tip, the seeds, the dose */
     if (rc == 0 && ns_run_score(r, res)) {
         ns_set_err(err, err_sz, "out of memory");
         rc = -1;

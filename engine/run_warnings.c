@@ -14,8 +14,8 @@ static const struct {
                           "tissue elements turned inside out after a step (det F <= 0), counted "
                           "once per element per step; the invertible FEM (paper 3.2) gives them "
                           "restoring forces and they come back",
-                          "transient ones are information; ones in a state a result was read "
-                          "from make that result doubtful near them"},
+                          "ones away from what a result reads are information; one beside a "
+                          "point read (a seed, a target, the tip) makes that reading doubtful"},
     [NS_WARN_UNCONVERGED] = {"unconverged", "unconverged",
                              "a step whose final coupled solve missed its tolerance "
                              "(tau_sol); the step keeps the last iterate",
@@ -40,13 +40,21 @@ void ns_run_warnings_step(NsRunWarnings *w, const int counts[NS_WARN_KINDS])
     }
 }
 
-void ns_run_warnings_read(NsRunWarnings *w)
+void ns_run_warnings_read(NsRunWarnings *w, int inverted_beside)
 {
-    if (w->read_step == w->step)
-        return;
-    w->read_step = w->step;
-    for (int k = 0; k < NS_WARN_KINDS; k++)
-        w->read[k] += w->last[k];
+    if (w->read_step != w->step) {
+        w->read_step = w->step;
+        w->read_inverted = 0;
+        for (int k = 0; k < NS_WARN_KINDS; k++)
+            if (k != NS_WARN_INVERTED)
+                w->read[k] += w->last[k];
+    }
+    int room = w->last[NS_WARN_INVERTED] - w->read_inverted;
+    int add = inverted_beside < room ? inverted_beside : room;
+    if (add > 0) {
+        w->read_inverted += add;
+        w->read[NS_WARN_INVERTED] += add;
+    }
 }
 
 int ns_run_warnings_affected(const NsRunWarnings *w, int k)
@@ -97,10 +105,10 @@ void ns_run_warnings_line(const NsRunWarnings *w, char *buf, size_t n)
             at += (size_t)snprintf(buf + at, n - at, "%s %s %d", k ? "," : "", kinds[k].label,
                                    w->total[k]);
         else if (a == 0)
-            at += (size_t)snprintf(buf + at, n - at, "%s %s %d (all transient)", k ? "," : "",
-                                   kinds[k].label, w->total[k]);
+            at += (size_t)snprintf(buf + at, n - at, "%s %s %d (none bore on the result)",
+                                   k ? "," : "", kinds[k].label, w->total[k]);
         else
-            at += (size_t)snprintf(buf + at, n - at, "%s %s %d (%d where a result was read)",
+            at += (size_t)snprintf(buf + at, n - at, "%s %s %d (%d bore on the result)",
                                    k ? "," : "", kinds[k].label, w->total[k], a);
     }
 }

@@ -3,25 +3,34 @@
 #include "ns_test.h"
 #include "run_warnings.h"
 
-/* Three steps: inverted 2, then 0, then 3; a result read after the first (twice: counted
- * once) and after the third. Friction unresolved in the second only, never read. */
+/* Three steps: inverted 2 (with friction unresolved), then 0 (friction unresolved), then 3. A
+ * result read after the first, twice, both times with both inverted elements beside it (two
+ * counted, not four; the friction once); none read after the second; after the third, one
+ * inverted element beside what was read. */
 static int read_states_only(void)
 {
     NsRunWarnings w = {0};
-    ns_run_warnings_step(&w, (int[NS_WARN_KINDS]){[NS_WARN_INVERTED] = 2});
-    ns_run_warnings_read(&w);
-    ns_run_warnings_read(&w);
+    ns_run_warnings_step(&w, (int[NS_WARN_KINDS]){[NS_WARN_INVERTED] = 2, [NS_WARN_LCP] = 1});
+    ns_run_warnings_read(&w, 2);
+    ns_run_warnings_read(&w, 2);
     ns_run_warnings_step(&w, (int[NS_WARN_KINDS]){[NS_WARN_LCP] = 1});
     ns_run_warnings_step(&w, (int[NS_WARN_KINDS]){[NS_WARN_INVERTED] = 3});
-    ns_run_warnings_read(&w);
+    ns_run_warnings_read(&w, 1);
     ENSURE(w.total[NS_WARN_INVERTED] == 5 && w.steps[NS_WARN_INVERTED] == 2);
     ENSURE(w.most[NS_WARN_INVERTED] == 3);
-    ENSURE(ns_run_warnings_affected(&w, NS_WARN_INVERTED) == 5);
-    ENSURE(w.total[NS_WARN_LCP] == 1 && ns_run_warnings_affected(&w, NS_WARN_LCP) == 0);
+    ENSURE(ns_run_warnings_affected(&w, NS_WARN_INVERTED) == 3);
+    ENSURE(w.total[NS_WARN_LCP] == 2 && ns_run_warnings_affected(&w, NS_WARN_LCP) == 1);
     char line[256];
     ns_run_warnings_line(&w, line, sizeof line);
-    ENSURE(strcmp(line, "warnings: NaN 0, inverted 5 (5 where a result was read), unconverged 0, "
-                        "friction unresolved 1 (all transient)") == 0);
+    ENSURE(strcmp(line, "warnings: NaN 0, inverted 5 (3 bore on the result), unconverged 0, "
+                        "friction unresolved 2 (1 bore on the result)") == 0);
+    NsRunWarnings q = {0};
+    ns_run_warnings_step(&q, (int[NS_WARN_KINDS]){[NS_WARN_INVERTED] = 1, [NS_WARN_LCP] = 1});
+    ns_run_warnings_step(&q, (int[NS_WARN_KINDS]){0});
+    ns_run_warnings_read(&q, 0);
+    ns_run_warnings_line(&q, line, sizeof line);
+    ENSURE(strcmp(line, "warnings: NaN 0, inverted 1 (none bore on the result), unconverged 0, "
+                        "friction unresolved 1 (none bore on the result)") == 0);
     return 0;
 }
 
@@ -29,11 +38,11 @@ static int read_states_only(void)
 static int nan_always_counts(void)
 {
     NsRunWarnings w = {0};
-    ns_run_warnings_read(&w);
+    ns_run_warnings_read(&w, 0);
     ns_run_warnings_step(&w, (int[NS_WARN_KINDS]){[NS_WARN_NAN] = 1, [NS_WARN_UNCONVERGED] = 1});
     ENSURE(ns_run_warnings_affected(&w, NS_WARN_NAN) == 1);
     ENSURE(ns_run_warnings_affected(&w, NS_WARN_UNCONVERGED) == 0);
-    ns_run_warnings_read(&w);
+    ns_run_warnings_read(&w, 0);
     ENSURE(ns_run_warnings_affected(&w, NS_WARN_UNCONVERGED) == 1);
     return 0;
 }
