@@ -51,7 +51,8 @@ static const char run_usage[] =
     "                     [--set KEY=VALUE]... [--record LOG.csv | --replay LOG.csv]\n"
     "                     [--trainee ID] [--session ID] [--rescore] [--score-row]\n"
     "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
-    "                     [--height H] [--frame-every K] [--quiet]\n"
+    "                     [--height H] [--frame-every K] [--view NAME | --layout A,B]\n"
+    "                     [--quiet]\n"
     "                     [--checkpoint-at T FILE] [--resume FILE]\n";
 
 /* A bad command line: one line, the usage on --help (the one-line contract for bad input). */
@@ -63,6 +64,31 @@ static int usage_error(const char *fmt, const char *arg)
     ns_one_line(line);
     fprintf(stderr, "needlesim run: %s (needlesim run --help)\n", line);
     return 2;
+}
+
+/* --view NAME, --layout A,B[,C]: the views (render/scene.h) in o. Returns 0 or 2. */
+static int parse_views(NsRunOpts *o, const char *a, const char *v)
+{
+    if (!v)
+        return usage_error("%s needs a value", a);
+    if (o->nviews)
+        return usage_error("%s: one --view or --layout only", a);
+    char names[128];
+    snprintf(names, sizeof names, "%s", v);
+    bool one = strcmp(a, "--view") == 0;
+    for (char *save = NULL, *t = strtok_r(names, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        int view = ns_view_parse(t);
+        if (view < 0)
+            return usage_error("'%s': a view is one of side, top, axis, cutaway3d", t);
+        if (o->nviews == (one ? 1 : 3))
+            return usage_error(one ? "--view '%s': one view (--layout A,B for more)"
+                                   : "--layout '%s': at most three views",
+                               v);
+        o->views[o->nviews++] = view;
+    }
+    if (o->nviews == 0 || strlen(v) >= sizeof names)
+        return usage_error("'%s': expected view names", v);
+    return 0;
 }
 
 const char *ns_run_opt_set(NsRunOpts *o, const char *v)
@@ -162,6 +188,11 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             else
                 o->height = (int)n;
             i++;
+        } else if (strcmp(a, "--view") == 0 || strcmp(a, "--layout") == 0) {
+            int rc = parse_views(o, a, v);
+            if (rc)
+                return rc;
+            i++;
         } else if (strcmp(a, "--checkpoint-at") == 0) {
             if (!v || i + 2 >= argc)
                 return usage_error("%s needs a time [s] and a file", a);
@@ -208,8 +239,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
         return usage_error("--checkpoint-at and --resume name the same file '%s'", o->checkpoint);
     if (o->no_render && (o->frames || o->video))
         return usage_error("%s", "--no-render with --frames or --video: which is it?");
-    if (o->no_render && (o->width || o->height || o->frame_every))
-        return usage_error("%s", "--no-render with --width, --height or --frame-every");
+    if (o->no_render && (o->width || o->height || o->frame_every || o->nviews))
+        return usage_error("%s", "--no-render with --width, --height, --frame-every or a view");
     o->width = o->width ? o->width : 1280;
     o->height = o->height ? o->height : 720;
     return 0;

@@ -420,6 +420,7 @@ void ns_run_check_obstacles(NsRun *r, double t, int exited)
         bool in = region >= 0 && region == r->spec.obstacles[k].region;
         if (in && !o->inside) {
             memcpy(o->entry, tip, sizeof o->entry);
+            (void)ns_run_debrief_mark(r, NS_MARK_OBSTACLE); /* (out of memory: a chart mark less) */
             if (!o->violated)
                 o->first_t = t;
             o->violated = true;
@@ -538,6 +539,10 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
     NsStepControls step_ctl = ns_step_controls(ctl.v_insert, ctl.v_base, ctl.twist_rate);
     if (ctl.drop_seed && ns_run_release_seed(r, t, err, err_sz))
         return -1;
+    if (ctl.drop_seed && ns_run_debrief_mark(r, NS_MARK_SEED)) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
     if (ctl.v_insert > 0.0 && r->prev_v <= 0.0)
         r->insertions++;
     r->prev_v = ctl.v_insert;
@@ -573,6 +578,10 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
     r->steps++;
     /* The mesh after the step, with what came before it (a needle's entry or exit). */
     if (r->have_dw && ns_dihedral_watch_look(&r->dw, &r->tissue.mesh)) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    if (ns_run_debrief_step(r, ctl.twist_rate, ns_run_depth(r), st.axial_force)) {
         ns_set_err(err, err_sz, "out of memory");
         return -1;
     }
@@ -625,6 +634,12 @@ static int run_step(NsRun *r, NsControl ctl, double t, char *err, int err_sz)
     if (r->traj)
         fputc('\n', r->traj);
     ns_run_check_obstacles(r, (double)r->steps * sp->dt, r->exited);
+    ns_run_debrief_closest(r, tip, (double)r->steps * sp->dt);
+    for (int i = events; i < r->event_n; i++)
+        if (r->events[i].type == EVENT_BONE_CONTACT && ns_run_debrief_mark(r, NS_MARK_BONE)) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
     /* results read from this state: an event's place, an obstacle's depth (run_warnings.h) */
     bool inside = false;
     for (int k = 0; k < sp->obstacle_count; k++)
@@ -762,6 +777,7 @@ void ns_run_free(NsRun *r)
         ns_run_steer_free(&r->steer);
     ns_run_dosimetry_free(r);
     ns_run_video_free(&r->cues);
+    ns_run_debrief_free(&r->debrief);
     if (r->have_c)
         ns_coupled_free(&r->c);
     if (r->have_rod)

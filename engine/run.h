@@ -40,6 +40,7 @@ typedef struct NsRunOpts {
     bool no_render, frames;
     const char *video;
     int width, height, frame_every; /* frame_every 0: the scenario's camera decides */
+    int views[3], nviews;           /* --view / --layout (NsView); nviews 0: the scenario's */
     /* checkpoints (docs/checkpoints.md): --checkpoint-at T FILE, --resume FILE */
     const char *checkpoint, *resume;
     double checkpoint_at;
@@ -74,6 +75,25 @@ typedef struct NsRunSteer {
     double *way;   /* (way_n x 3) the kept RRT path's waypoints [m] */
     int way_n;
 } NsRunSteer;
+
+/* The debrief (engine/run_debrief.c, docs/rendering.md "The debrief"): what a trainee is told
+ * after a run. Plain sentences from the run's events (each target's error along and across the
+ * insertion and how far the tissue carried it, each obstacle's closest approach or entry,
+ * twists, bone, seeds, the warnings), the report's `debrief`, and a chart of the axial force
+ * against depth with the events marked, on the contact sheet. */
+/* What the chart marks, in step order. */
+enum { NS_MARK_TWIST, NS_MARK_PUNCTURE, NS_MARK_SEED, NS_MARK_OBSTACLE, NS_MARK_BONE };
+
+typedef struct NsRunDebrief {
+    NsSeries depth, force; /* each step's depth [m] and axial force [N] (with pictures only) */
+    struct NsDebriefMark {
+        int kind, at; /* NS_MARK_*, index into depth and force */
+    } * marks;
+    int mark_n, mark_cap;
+    int twists;    /* times the base began to turn */
+    bool twisting; /* it turned in the last step */
+    bool began;    /* ... and not in the one before */
+} NsRunDebrief;
 
 /* ---- the model ---- */
 
@@ -124,6 +144,8 @@ typedef struct NsRun {
         bool violated, inside;
         double first_t, entry[3], max_depth;
         int steps_inside;
+        double closest, closest_t; /* the tip's least distance to it and when [m, s] (debrief) */
+        bool approached;           /* closest holds a distance */
     } * obst;
     int tip_hint, insertions;
     double prev_v;
@@ -177,6 +199,7 @@ typedef struct NsRun {
     bool have_steer;
     struct NsRunDose *dose; /* dosimetry = {...} (engine/run_dosimetry.c), or NULL */
     NsRunCues cues;         /* the authored video's (engine/run_video.c) */
+    NsRunDebrief debrief;   /* engine/run_debrief.c */
 } NsRun;
 
 enum { EVENT_BONE_CONTACT, EVENT_TIP_EXIT, EVENT_REENTRY };
@@ -316,5 +339,29 @@ const struct NsDvh *ns_run_dosimetry_dvh(const NsRun *r, int delivered, int regi
 struct NsImage;
 int ns_run_dosimetry_chart(const NsRun *r, struct NsImage *im, char *err, int err_sz);
 int ns_run_dosimetry_rows(const NsRun *r, char (*rows)[128], int max);
+
+/* engine/run_debrief.c (above) */
+/* The shortest distance from p to tet e of m at its world positions [m] (0 inside). */
+double ns_run_tet_distance(const double *x, const int *tet_node, int e, const double p[3]);
+
+/* After a step: the twist count, and with pictures the chart's point. */
+int ns_run_debrief_step(NsRun *r, double twist_rate, double depth, double axial);
+/* A mark on the chart at the latest step (with pictures only). */
+int ns_run_debrief_mark(NsRun *r, int kind);
+/* The closest approach of the tip at p to each obstacle not entered this step (call after the
+ * obstacles' check): the distance to the nearest tet of the obstacle's region. */
+void ns_run_debrief_closest(NsRun *r, const double p[3], double t);
+
+/* The sentences (at most max, each < 256 bytes) into out; returns how many. */
+int ns_run_debrief_sentences(const NsRun *r, const NsRunResults *res, char (*out)[256], int max);
+/* report.json's `debrief` {sentences, targets [{name, moved_mm, along_mm, across_mm}]}. */
+void ns_run_debrief_report(NsJson *j, const NsRun *r, const NsRunResults *res);
+/* The sentences as contact-sheet rows under "debrief:", broken to 100 columns; returns how
+ * many of max it wrote. */
+int ns_run_debrief_rows(const NsRun *r, const NsRunResults *res, char (*rows)[128], int max);
+/* The force-depth chart (empty image without steps). */
+int ns_run_debrief_chart(const NsRun *r, struct NsImage *im, char *err, int err_sz);
+
+void ns_run_debrief_free(NsRunDebrief *d);
 
 #endif

@@ -129,6 +129,8 @@ static int run_state_pack(NsPack *p, NsRun *r)
     NS_PACK(p, r->factorizations);
     NS_PACK(p, r->consistent);
     NS_PACK(p, r->warn);
+    NS_PACK(p, r->debrief.twists);
+    NS_PACK(p, r->debrief.twisting);
     NS_PACK(p, r->repaired);
     /* The minima so far; the watch's copy is the mesh as built, which the next look compares
      * with the resumed mesh (every tet changed since counted again: the same minimum). */

@@ -67,6 +67,10 @@ int ns_run_render_setup(NsRun *r, char *err, int err_sz)
                          .nviews = cam->view_count,
                          .legend = cam->friction_colours};
     memcpy(o.views, cam->views, sizeof o.views);
+    if (r->opt.nviews > 0) { /* --view, --layout */
+        memcpy(o.views, r->opt.views, sizeof o.views);
+        o.nviews = r->opt.nviews;
+    }
     if (ns_run_render_open(&r->rr, &o, err, err_sz)) {
         ns_run_render_abort(&r->rr); /* what it made before it failed */
         return -1;
@@ -254,6 +258,27 @@ int ns_run_render_after_step(NsRun *r, const NsCouplingStats *st, bool dropped, 
                  f, t);
         r->punctures++;
         r->peak_axial = f;
+        if (ns_run_debrief_mark(r, NS_MARK_PUNCTURE) ||
+            ns_run_render_now(r, cap, false, NULL, err, err_sz))
+            return -1;
+    }
+    /* the debrief's moments (run_debrief.c): the base starting to turn (the first three times),
+     * an obstacle entered (the first time), the tip stopped by bone */
+    if (r->debrief.began && r->debrief.twists <= 3) {
+        snprintf(cap, sizeof cap, "the base turns (%d), t = %.2f s", r->debrief.twists, t);
+        if (ns_run_render_now(r, cap, false, NULL, err, err_sz))
+            return -1;
+    }
+    for (int k = 0; k < sp->obstacle_count; k++)
+        if (r->obst[k].inside && r->obst[k].steps_inside == 1) {
+            snprintf(cap, sizeof cap, "enters %.40s, t = %.2f s", sp->obstacles[k].name, t);
+            if (ns_run_render_now(r, cap, false, NULL, err, err_sz))
+                return -1;
+        }
+    const struct Event *ev = r->event_n ? &r->events[r->event_n - 1] : NULL;
+    if (ev && ev->type == EVENT_BONE_CONTACT && ev->t == t) {
+        snprintf(cap, sizeof cap, "bone contact (%.40s), t = %.2f s", ns_run_event_region(r, ev),
+                 t);
         if (ns_run_render_now(r, cap, false, NULL, err, err_sz))
             return -1;
     }
@@ -292,13 +317,13 @@ int ns_run_render_end(NsRun *r, const NsRunResults *res, char *err, int err_sz)
     snprintf(cap, sizeof cap, "end, t = %.2f s%s", (double)r->steps * sp->dt, missed);
     if (ns_run_render_now(r, cap, true, res, err, err_sz))
         return -1;
-    enum { ROWS = 32 };
+    enum { ROWS = 56 };
     char rows[ROWS][128];
     int n = 0;
     if (sp->target_count)
         snprintf(rows[n++], sizeof rows[0], "%-22s %9s %8s %5s %4s", "target", "error mm", "tol mm",
                  "by", "hit");
-    for (int i = 0; i < sp->target_count && n < ROWS - 4; i++)
+    for (int i = 0; i < sp->target_count && n < ROWS - 28; i++)
         snprintf(rows[n++], sizeof rows[0], "%-22.22s %9.2f %8.2f %5s %4s", sp->targets[i].name,
                  res->targets[i].error_mm, 1e3 * sp->targets[i].tolerance,
                  res->targets[i].by_seed ? "seed" : "tip", res->targets[i].hit ? "yes" : "no");
@@ -314,16 +339,35 @@ int ns_run_render_end(NsRun *r, const NsRunResults *res, char *err, int err_sz)
              "score %.1f / 100 (targets %.1f, obstacles -%.0f); insertions %d", res->total,
              res->target_part, res->obstacle_penalty, r->insertions);
     ns_run_warnings_line(&r->warn, rows[n++], sizeof rows[0]);
+    n += ns_run_debrief_rows(r, res, rows + n, ROWS - n);
     const char *table[ROWS];
     for (int i = 0; i < n; i++)
         table[i] = rows[i];
     char title[160];
     snprintf(title, sizeof title, "%s: score %.1f / 100, %ld steps, %.2f s", r->sc.name, res->total,
              r->steps, (double)r->steps * sp->dt);
-    NsImage chart;
-    if (ns_run_dosimetry_chart(r, &chart, err, err_sz))
-        return -1;
-    int rc = ns_run_render_finish(&r->rr, title, table, n, &chart, err, err_sz);
-    ns_image_free(&chart);
+    /* the charts, one above the other: force against depth, then the DVHs */
+    NsImage force = {0}, dose = {0}, both = {0};
+    int rc = ns_run_debrief_chart(r, &force, err, err_sz) ||
+                     ns_run_dosimetry_chart(r, &dose, err, err_sz)
+                 ? -1
+                 : 0;
+    const NsImage *chart = dose.rgb ? &dose : &force;
+    if (rc == 0 && force.rgb && dose.rgb) {
+        int w = force.w > dose.w ? force.w : dose.w;
+        rc = ns_image_alloc(&both, w, force.h + dose.h, err, err_sz);
+        if (rc == 0) {
+            static const uint8_t bg[3] = {24, 27, 34};
+            ns_image_fill(&both, bg);
+            ns_image_blit_scaled(&both, 0, 0, force.w, force.h, &force);
+            ns_image_blit_scaled(&both, 0, force.h, dose.w, dose.h, &dose);
+            chart = &both;
+        }
+    }
+    if (rc == 0)
+        rc = ns_run_render_finish(&r->rr, title, table, n, chart, err, err_sz);
+    ns_image_free(&force);
+    ns_image_free(&dose);
+    ns_image_free(&both);
     return rc;
 }

@@ -257,6 +257,12 @@ static void report_tissue(NsJson *j, NsRun *r, const NsRunResults *res)
         ns_json_number(j, o->violated ? o->first_t : 0.0);
         ns_json_key(j, "steps_inside");
         ns_json_int(j, o->steps_inside);
+        if (o->approached) { /* the tip's least distance to the region (run_debrief.c) */
+            ns_json_key(j, "closest_mm");
+            ns_json_number(j, 1e3 * o->closest);
+            ns_json_key(j, "closest_s");
+            ns_json_number(j, o->closest_t);
+        }
         ns_json_end_object(j);
     }
     ns_json_end_array(j);
@@ -326,6 +332,7 @@ static void report_outcome(NsJson *j, NsRun *r, const NsRunResults *res)
         bone += r->events[i].type == EVENT_BONE_CONTACT;
     ns_json_key(j, "bone_interferences");
     ns_json_int(j, bone);
+    ns_run_debrief_report(j, r, res);
     ns_json_key(j, "warnings");
     ns_json_begin_object(j);
     ns_json_key(j, "nan");

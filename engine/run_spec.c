@@ -15,6 +15,7 @@
 #include "names.h"
 #include "ns_limits.h"
 #include "remesh.h"
+#include "scene.h"
 
 /* t[key] without metamethods (pushed; its type returned): a scenario may put metatables on
  * the tables it returns, and none of them may run outside a protected call. Not a table:
@@ -96,9 +97,8 @@ static void read_camera(lua_State *L, int si, NsRunCamera *cam)
             for (int i = 0; i < n && i < 3; i++) {
                 lua_rawgeti(L, -1, i + 1);
                 const char *v = lua_tostring(L, -1);
-                cam->views[cam->view_count++] = v && strcmp(v, "top") == 0    ? 1
-                                                : v && strcmp(v, "axis") == 0 ? 2
-                                                                              : 0;
+                int view = v ? ns_view_parse(v) : -1; /* (checked in needlesim.lua) */
+                cam->views[cam->view_count++] = view >= 0 ? view : NS_VIEW_SIDE;
                 lua_pop(L, 1);
             }
             if (cam->view_count == 0)

@@ -142,10 +142,10 @@ static void take_views(const Take *k, NsRunCue *q)
     if (ty == LUA_TSTRING) {
         int v = ns_view_parse(lua_tostring(L, -1));
         if (v < 0)
-            take_error(k, "view", "must be \"side\", \"top\" or \"axis\"");
+            take_error(k, "view", "must be \"side\", \"top\", \"axis\" or \"cutaway3d\"");
         q->views[q->nviews++] = v;
     } else if (ty != LUA_TNIL) {
-        take_error(k, "view", "must be \"side\", \"top\" or \"axis\"");
+        take_error(k, "view", "must be \"side\", \"top\", \"axis\" or \"cutaway3d\"");
     }
     lua_pop(L, 1);
     lua_pushstring(L, "views");
@@ -158,7 +158,8 @@ static void take_views(const Take *k, NsRunCue *q)
             if (et == LUA_TNIL && i > 1)
                 break;
             if (v < 0 || i > 3)
-                take_error(k, "views", "must list one to three of \"side\", \"top\", \"axis\"");
+                take_error(k, "views",
+                           "must list one to three of \"side\", \"top\", \"axis\", \"cutaway3d\"");
             q->views[q->nviews++] = v;
         }
     } else if (ty != LUA_TNIL) {

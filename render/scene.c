@@ -33,8 +33,8 @@ void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3])
 
 int ns_view_parse(const char *name)
 {
-    static const char *names[3] = {"side", "top", "axis"};
-    for (int i = 0; i < 3; i++)
+    static const char *names[NS_VIEW_COUNT] = {"side", "top", "axis", "cutaway3d"};
+    for (int i = 0; i < NS_VIEW_COUNT; i++)
         if (strcmp(name, names[i]) == 0)
             return i;
     return -1;
@@ -42,7 +42,10 @@ int ns_view_parse(const char *name)
 
 const char *ns_view_name(NsView v)
 {
-    return v == NS_VIEW_TOP ? "top" : v == NS_VIEW_AXIS ? "axis" : "side";
+    return v == NS_VIEW_TOP         ? "top"
+           : v == NS_VIEW_AXIS      ? "axis"
+           : v == NS_VIEW_CUTAWAY3D ? "cutaway3d"
+                                    : "side";
 }
 
 /* ---- small vector helpers ---- */
@@ -151,6 +154,14 @@ void ns_scene_camera(const NsSceneInput *in, NsView v, double aspect, NsCamera *
         }
         if (normalize(f) < 1e-9)
             any_normal(a, f);
+        if (v == NS_VIEW_CUTAWAY3D) { /* from the side, 35 deg round towards the tip's end and
+                                       * 30 deg above (f is normal to a; a turned into it) */
+            double c1 = cos(35.0 * M_PI / 180.0), s1 = sin(35.0 * M_PI / 180.0);
+            double c2 = cos(30.0 * M_PI / 180.0), s2 = sin(30.0 * M_PI / 180.0);
+            for (int i = 0; i < 3; i++)
+                f[i] = c2 * (c1 * f[i] - s1 * a[i]) - s2 * up[i];
+            normalize(f);
+        }
         if (in->orbit_deg != 0.0) { /* f turned about a (f is normal to a) */
             double g[3], c = cos(in->orbit_deg * M_PI / 180.0),
                          sn = sin(in->orbit_deg * M_PI / 180.0);
@@ -158,8 +169,16 @@ void ns_scene_camera(const NsSceneInput *in, NsView v, double aspect, NsCamera *
             for (int i = 0; i < 3; i++)
                 f[i] = c * f[i] + sn * g[i];
         }
-        cross(a, f, u);
-        normalize(u);
+        if (v == NS_VIEW_CUTAWAY3D) { /* the world's up, as seen */
+            double k = dot(up, f);
+            for (int i = 0; i < 3; i++)
+                u[i] = up[i] - k * f[i];
+            if (normalize(u) < 1e-9)
+                any_normal(f, u);
+        } else {
+            cross(a, f, u);
+            normalize(u);
+        }
     }
     cross(f, u, r);
     double c[3], half_w = 0.0, half_h = 0.0, half_d = 0.0;
@@ -324,7 +343,7 @@ static int build_cut(const NsSceneInput *in, NsScene *s)
 }
 
 /* The outer surface: every boundary face, translucent (the shader clips the removed half). */
-static int build_glass(const NsSceneInput *in, NsScene *s)
+static int build_glass(const NsSceneInput *in, NsView v, NsScene *s)
 {
     const NsMesh *m = in->mesh;
     for (int e = 0; e < m->tet_slots; e++) {
@@ -332,7 +351,10 @@ static int build_glass(const NsSceneInput *in, NsScene *s)
         if (tn[0] < 0)
             continue;
         for (int k = 0; k < 4; k++) {
-            if (m->tet_adj[4 * e + k] >= 0)
+            int nb = m->tet_adj[4 * e + k];
+            /* the outer surface; in cutaway3d also the organs' surfaces: faces between regions,
+             * each once, in the colour of the higher region (an organ within the tissue) */
+            if (nb >= 0 && (v != NS_VIEW_CUTAWAY3D || m->tet_region[nb] >= m->tet_region[e]))
                 continue;
             int reg = m->tet_region[e];
             bool obst = in->obstacle_region && reg < in->regions && in->obstacle_region[reg];
@@ -446,10 +468,23 @@ static int build_solids(const NsSceneInput *in, NsScene *s)
         double r = fmax(in->rod_radius, 2.0 * px);
         const double *tip = in->rod_x + 3 * (n - 1), *pre = in->rod_x + 3 * (n - 2);
         double t[3] = {tip[0] - pre[0], tip[1] - pre[1], tip[2] - pre[2]}, apex[3];
-        normalize(t);
-        for (int i = 0; i < 3; i++) /* a bevel's point lies on the side it steers to */
-            apex[i] = tip[i] + 3.0 * r * t[i] + (in->bevel ? 0.9 * r * in->m2[i] : 0.0);
-        int rc = tube(&s->solid, in->rod_x, n, r, (const uint8_t(*)[3])rgb, apex);
+        double last = normalize(t);
+        /* the point is the simulated tip: the tube's last ring stands back from it by the
+         * cone's length (3 r, or the last edge's length less a little when that is shorter),
+         * and a bevel's point lies on the side it steers to */
+        double cone = fmin(3.0 * r, 0.9 * last);
+        double *x = malloc((size_t)n * 3 * sizeof *x);
+        if (!x) {
+            free(rgb);
+            return -1;
+        }
+        memcpy(x, in->rod_x, (size_t)n * 3 * sizeof *x);
+        for (int i = 0; i < 3; i++) {
+            x[3 * (n - 1) + i] = tip[i] - cone * t[i];
+            apex[i] = tip[i] + (in->bevel ? 0.9 * r * in->m2[i] : 0.0);
+        }
+        int rc = tube(&s->solid, x, n, r, (const uint8_t(*)[3])rgb, apex);
+        free(x);
         free(rgb);
         if (rc)
             return -1;
@@ -587,7 +622,7 @@ int ns_scene_build(const NsSceneInput *in, NsView v, double aspect, NsScene *s)
             nc[i] = -nc[i];
     memcpy(s->plane, nc, sizeof nc);
     s->plane[3] = -dot(nc, p0);
-    if (build_cut(in, s) || build_isodose(in, s) || build_glass(in, s) || build_solids(in, s))
+    if (build_cut(in, s) || build_isodose(in, s) || build_glass(in, v, s) || build_solids(in, s))
         return -1;
     return 0;
 }

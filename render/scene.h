@@ -47,8 +47,17 @@ extern const uint8_t ns_scene_iso_rgb[2][3]; /* the isodose levels' colours, in 
 /* The colour of tissue region k on the cut face. */
 void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3]);
 
-typedef enum NsView { NS_VIEW_SIDE = 0, NS_VIEW_TOP = 1, NS_VIEW_AXIS = 2 } NsView;
-/* "side", "top", "axis" -> NsView, or -1. */
+/* side, top: the section through the insertion axis, seen level and from above; axis: a cross
+ * section at the tip, seen along the needle; cutaway3d: the section through the axis seen from
+ * above and ahead at an angle, the organs' surfaces (the regions' interfaces) translucent. */
+typedef enum NsView {
+    NS_VIEW_SIDE = 0,
+    NS_VIEW_TOP = 1,
+    NS_VIEW_AXIS = 2,
+    NS_VIEW_CUTAWAY3D = 3
+} NsView;
+enum { NS_VIEW_COUNT = 4 };
+/* "side", "top", "axis", "cutaway3d" -> NsView, or -1. */
 int ns_view_parse(const char *name);
 const char *ns_view_name(NsView v);
 

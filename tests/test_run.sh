@@ -163,7 +163,7 @@ if [ "$PART" = scenarios ]; then
     for sc in tutorial two_cylinders phantom_single_bend phantom_double_bend steer_around_vessel; do
         "$BIN" run "$SRC/scenarios/$sc.lua" --no-render -o "$TMP/$sc" --quiet >/dev/null 2>"$TMP/err_$sc"
         rc=$?
-        if [ $rc = 0 ] && python3 - "$TMP/$sc/report.json" "$TMP/finite.py" <<'PY' >"$TMP/py_$sc" 2>&1; then
+        if [ $rc = 0 ] && python3 - "$TMP/$sc/report.json" "$TMP/finite.py" "$sc" <<'PY' >"$TMP/py_$sc" 2>&1; then
 import json, math, sys
 r = json.load(open(sys.argv[1]))
 exec(open(sys.argv[2]).read())
@@ -171,8 +171,23 @@ finite(r, "report")
 assert r["steps"] > 0 and r["script_finished"]
 # issue 35: the whole mesh's worst dihedral angle at rest over every step
 assert r["mesh"]["min_dihedral_deg_any_step"] >= 5.0, r["mesh"]
-print("%d steps, score %.1f, min_dihedral_deg_any_step %.2f" % (
-    r["steps"], r["score"]["total"], r["mesh"]["min_dihedral_deg_any_step"]))
+# issue 39: the debrief. Each target's error split along and across the insertion adds back up
+# to it; each obstacle not entered has a closest approach, said in a sentence; the double bend
+# turns its base once, the single bend never.
+d = r["debrief"]
+assert d["sentences"] and all(isinstance(s, str) and s for s in d["sentences"]), d
+for t, dt in zip(r["targets"], d["targets"]):
+    assert dt["name"] == t["name"] and dt["moved_mm"] >= 0, dt
+    assert abs(math.hypot(dt["along_mm"], dt["across_mm"]) - t["error_mm"]) < 1e-6, (dt, t)
+for o in r["obstacles"]:
+    if not o["violated"]:  # missed, or met at its surface (a held rod: the tip stops there)
+        said = ("The %s was missed by %.1f mm" % (o["name"], o["closest_mm"])
+                if o["closest_mm"] >= 0.05 else "The tip reached the %s at" % o["name"])
+        assert o["closest_mm"] >= 0 and any(said in s for s in d["sentences"]), (o, d)
+twists = {"phantom_double_bend": 1, "phantom_single_bend": 0}.get(sys.argv[3])
+assert twists is None or d["twists"] == twists, d["twists"]
+print("%d steps, score %.1f, min_dihedral_deg_any_step %.2f, %d debrief sentences" % (
+    r["steps"], r["score"]["total"], r["mesh"]["min_dihedral_deg_any_step"], len(d["sentences"])))
 PY
             pass "$sc runs, report finite ($(cat "$TMP/py_$sc"))"
         else
@@ -269,7 +284,7 @@ PY
     bad_cue() { refused "cue_$1" "$2" "$VC" --set bad="$1"; }
     bad_cue caption_text "video_cues.lua:9: act.caption: text must be a non-empty string"
     bad_cue slow_factor "video_cues.lua:10: act.slow_motion: factor must be a number in [1, 16]"
-    bad_cue camera_view "video_cues.lua:11: act.camera: view 1 must be \"side\", \"top\" or \"axis\""
+    bad_cue camera_view "video_cues.lua:11: act.camera: view 1 must be \"side\", \"top\", \"axis\" or \"cutaway3d\""
     bad_cue card_long "video_cues.lua:12: act.card: title must be a non-empty string of at most 200 bytes (got 201 bytes)"
     bad_cue chapter_field "video_cues.lua:13: act.chapter: unknown field 'at'"
     bad_cue raw_kind "video_cues.lua: sim.control.video[1].kind must be \"caption\""
@@ -475,7 +490,8 @@ if [ $? = 0 ] && sed -n 4,5p "$TMP/ids.csv" | tr '\n' ' ' | grep -q "^#trainee A
 else
     fail "--trainee/--session" "$(head -1 "$TMP/err_ids") $(head -5 "$TMP/ids.csv" | tr '\n' ' ')"
 fi
-for args in "--trainee a,b" "--session $(printf 'x%.0s' $(seq 65))" "--trainee" "--rescore"; do
+for args in "--trainee a,b" "--session $(printf 'x%.0s' $(seq 65))" "--trainee" "--rescore" \
+    "--layout cutaway3d,trus" "--view side,top" "--no-render --view side"; do
     # shellcheck disable=SC2086
     "$BIN" run "$TUT" -o "$TMP/o_ids2" $args >/dev/null 2>"$TMP/err_ids2"
     rc=$?
@@ -891,11 +907,12 @@ if [ -d "$TMP/r2/frames" ] && diff -r -q "$TMP/r1/frames" "$TMP/r2/frames" >/dev
 else
     fail "deterministic frames" "$(diff -r -q "$TMP/r1/frames" "$TMP/r2/frames" 2>&1 | head -2)"
 fi
-# Three views side by side (camera = {views = ...}): each third shows the tissue's cut face.
+# Three views side by side (camera = {views = ...}, and --layout, which replaces them: the top
+# view by cutaway3d): each third shows the tissue's cut face.
 sed 's/^    name = "tutorial",/    name = "tutorial", camera = { views = { "side", "top", "axis" }, fps = 10 },/' \
     "$TUT" >"$TMP/views.lua"
 "$BIN" run "$TMP/views.lua" -o "$TMP/rv" --frames --width 480 --height 160 --steps 40 \
-    --frame-every 40 --quiet >/dev/null 2>"$TMP/err_rv"
+    --frame-every 40 --layout side,cutaway3d,axis --quiet >/dev/null 2>"$TMP/err_rv"
 rc=$?
 if [ $rc = 0 ] && python3 - "$TMP/rv" <<'PY' >"$TMP/py_rv" 2>&1; then
 import json, struct, sys, zlib
