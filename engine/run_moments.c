@@ -126,7 +126,7 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
         res = &own;
     }
     int nt = sp->target_count, ns = r->seed_n, nm = sp->marker_count;
-    double *buf = malloc((size_t)(4 * nt + 3 * ns + 3 * nm + 1) * sizeof *buf);
+    double *buf = malloc((size_t)(7 * nt + 3 * ns + 3 * nm + 1) * sizeof *buf);
     bool *hit = malloc((size_t)nt + 1);
     int rc = 0;
     if (!buf || !hit) {
@@ -138,7 +138,9 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
     double near = INFINITY;
     int near_i = -1;
     if (rc == 0) {
-        double *tx = buf, *tr = buf + 3 * nt, *sx = tr + nt, *mx = sx + 3 * ns;
+        double *tx = buf, *tr = buf + 3 * nt, *sx = tr + nt, *mx = sx + 3 * ns, *x0 = mx + 3 * nm;
+        for (int i = 0; i < nt; i++) /* where the targets started (the mesh as built) */
+            memcpy(x0 + 3 * i, sp->targets[i].at, 3 * sizeof(double));
         for (int i = 0; i < nt; i++) {
             memcpy(tx + 3 * i, res->targets[i].x, 3 * sizeof(double));
             tr[i] = sp->targets[i].tolerance;
@@ -176,6 +178,7 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
         in.target_x = tx;
         in.target_r = tr;
         in.target_hit = hit;
+        in.target_x0 = x0;
         in.targets = nt;
         in.seed_x = sx;
         in.seeds = ns;

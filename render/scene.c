@@ -494,11 +494,25 @@ static int build_solids(const NsSceneInput *in, NsScene *s)
                 return -1;
         }
     }
+    static const uint8_t ghost_rgb[2][3] = {{150, 156, 168}, {150, 156, 168}};
     for (int i = 0; i < in->targets; i++) {
         double r = fmax(0.5 * in->target_r[i], 4.0 * px);
         if (sphere(&s->solid, in->target_x + 3 * i, r,
                    in->target_hit && in->target_hit[i] ? ns_scene_hit_rgb : ns_scene_miss_rgb))
             return -1;
+        /* where the target started, a grey ghost joined to it, once the tissue moved it by
+         * more than its drawn radius */
+        const double *x0 = in->target_x0 ? in->target_x0 + 3 * i : NULL;
+        double d[3] = {0, 0, 0}, seg[6];
+        for (int k = 0; x0 && k < 3; k++)
+            d[k] = in->target_x[3 * i + k] - x0[k];
+        if (x0 && sqrt(dot(d, d)) > r) {
+            memcpy(seg, x0, 3 * sizeof *seg);
+            memcpy(seg + 3, in->target_x + 3 * i, 3 * sizeof *seg);
+            if (sphere(&s->solid, x0, 0.6 * r, ghost_rgb[0]) ||
+                tube(&s->solid, seg, 2, fmax(0.15 * r, px), ghost_rgb, NULL))
+                return -1;
+        }
     }
     static const uint8_t seed_rgb[3] = {240, 240, 225}, marker_rgb[3] = {225, 60, 205};
     for (int i = 0; i < in->seeds; i++)

@@ -80,6 +80,7 @@ typedef struct NsSceneInput {
     const double *target_x; /* (targets x 3) */
     const double *target_r; /* (targets) the tolerance [m] */
     const bool *target_hit;
+    const double *target_x0; /* (targets x 3) where each target started, or NULL: a ghost */
     int targets;
     const double *seed_x;
     int seeds;

@@ -305,6 +305,19 @@ static int pixels_show_the_scene(void)
     const uint8_t *rd = pixel(&im, &cam, w, h, 0, b.target_x + 3);
     ENSURE(g && g[1] > g[0] + 60 && g[1] > g[2] + 60);
     ENSURE(rd && rd[0] > rd[1] + 80 && rd[0] > rd[2] + 80);
+    /* a target's starting place (the missed one, started 5 mm above where it is): a grey
+     * ghost there; the first target did not move, and has none */
+    double x0[6] = {b.target_x[0], b.target_x[1], b.target_x[2],
+                    b.target_x[3], b.target_x[4], b.target_x[5] + 0.005};
+    b.in.target_x0 = x0;
+    NsImage ghost = {0};
+    ENSURE(render_block(&b, &f, &ghost, false) == 0);
+    const uint8_t *gh = pixel(&ghost, &cam, w, h, 0, x0 + 3);
+    ENSURE(gh && abs(gh[0] - gh[2]) < 30 && abs(gh[0] - gh[1]) < 30 && gh[0] > 100);
+    const uint8_t *still = pixel(&ghost, &cam, w, h, 0, b.target_x);
+    ENSURE(still && still[1] > still[0] + 60); /* the first target, green as before */
+    b.in.target_x0 = NULL;
+    ns_image_free(&ghost);
     /* deterministic: the same scene twice gives the same bytes */
     ENSURE(render_block(&b, &f, &again, false) == 0);
     ENSURE(memcmp(im.rgb, again.rgb, (size_t)w * h * 3) == 0);
