@@ -79,7 +79,7 @@ static int parse_views(NsRunOpts *o, const char *a, const char *v)
     for (char *save = NULL, *t = strtok_r(names, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
         int view = ns_view_parse(t);
         if (view < 0)
-            return usage_error("'%s': a view is one of side, top, axis, cutaway3d", t);
+            return usage_error("'%s': a view is one of side, top, axis, cutaway3d, trus", t);
         if (o->nviews == (one ? 1 : 3))
             return usage_error(one ? "--view '%s': one view (--layout A,B for more)"
                                    : "--layout '%s': at most three views",

@@ -142,10 +142,10 @@ static void take_views(const Take *k, NsRunCue *q)
     if (ty == LUA_TSTRING) {
         int v = ns_view_parse(lua_tostring(L, -1));
         if (v < 0)
-            take_error(k, "view", "must be \"side\", \"top\", \"axis\" or \"cutaway3d\"");
+            take_error(k, "view", "must be \"side\", \"top\", \"axis\", \"cutaway3d\" or \"trus\"");
         q->views[q->nviews++] = v;
     } else if (ty != LUA_TNIL) {
-        take_error(k, "view", "must be \"side\", \"top\", \"axis\" or \"cutaway3d\"");
+        take_error(k, "view", "must be \"side\", \"top\", \"axis\", \"cutaway3d\" or \"trus\"");
     }
     lua_pop(L, 1);
     lua_pushstring(L, "views");
@@ -159,7 +159,8 @@ static void take_views(const Take *k, NsRunCue *q)
                 break;
             if (v < 0 || i > 3)
                 take_error(k, "views",
-                           "must list one to three of \"side\", \"top\", \"axis\", \"cutaway3d\"");
+                           "must list one to three of \"side\", \"top\", \"axis\", \"cutaway3d\", "
+                           "\"trus\"");
             q->views[q->nviews++] = v;
         }
     } else if (ty != LUA_TNIL) {

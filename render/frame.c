@@ -1,6 +1,8 @@
 /* Composing a debrief frame: views side by side, HUD text over them (render/frame.h). */
 #include "frame.h"
 
+#include "trus.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -86,6 +88,8 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
     int vw = f->w / (nviews > 0 ? nviews : 1);
     for (int k = 0; k < nviews; k++) {
         int x = k * vw, w = k == nviews - 1 ? f->w - x : vw;
+        if (views[k] == NS_VIEW_TRUS)
+            continue; /* drawn on the read-back image, below */
         NsCamera cam;
         ns_scene_camera(in, (NsView)views[k], (double)w / f->h, &cam);
         double d[3] = {cam.target[0] - cam.eye[0], cam.target[1] - cam.eye[1],
@@ -105,6 +109,9 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
     }
     if (ns_renderer_read(f->gl, out, err, err_sz))
         return -1;
+    for (int k = 0; k < nviews; k++)
+        if (views[k] == NS_VIEW_TRUS)
+            ns_trus_draw(in, out, k * vw, k == nviews - 1 ? f->w - k * vw : vw, f->h);
     double t1 = now_ms();
     f->build_ms = build;
     f->gl_ms = t1 - t0 - build;

@@ -33,7 +33,7 @@ void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3])
 
 int ns_view_parse(const char *name)
 {
-    static const char *names[NS_VIEW_COUNT] = {"side", "top", "axis", "cutaway3d"};
+    static const char *names[NS_VIEW_COUNT] = {"side", "top", "axis", "cutaway3d", "trus"};
     for (int i = 0; i < NS_VIEW_COUNT; i++)
         if (strcmp(name, names[i]) == 0)
             return i;
@@ -42,10 +42,8 @@ int ns_view_parse(const char *name)
 
 const char *ns_view_name(NsView v)
 {
-    return v == NS_VIEW_TOP         ? "top"
-           : v == NS_VIEW_AXIS      ? "axis"
-           : v == NS_VIEW_CUTAWAY3D ? "cutaway3d"
-                                    : "side";
+    static const char *names[NS_VIEW_COUNT] = {"side", "top", "axis", "cutaway3d", "trus"};
+    return (int)v >= 0 && (int)v < (int)NS_VIEW_COUNT ? names[v] : "side";
 }
 
 /* ---- small vector helpers ---- */

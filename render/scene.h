@@ -49,15 +49,17 @@ void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3]);
 
 /* side, top: the section through the insertion axis, seen level and from above; axis: a cross
  * section at the tip, seen along the needle; cutaway3d: the section through the axis seen from
- * above and ahead at an angle, the organs' surfaces (the regions' interfaces) translucent. */
+ * above and ahead at an angle, the organs' surfaces (the regions' interfaces) translucent;
+ * trus: a transverse ultrasound image at the tip's depth. */
 typedef enum NsView {
     NS_VIEW_SIDE = 0,
     NS_VIEW_TOP = 1,
     NS_VIEW_AXIS = 2,
-    NS_VIEW_CUTAWAY3D = 3
+    NS_VIEW_CUTAWAY3D = 3,
+    NS_VIEW_TRUS = 4 /* simulated ultrasound, drawn on the CPU (render/trus.h), not a scene */
 } NsView;
-enum { NS_VIEW_COUNT = 4 };
-/* "side", "top", "axis", "cutaway3d" -> NsView, or -1. */
+enum { NS_VIEW_COUNT = 5 };
+/* "side", "top", "axis", "cutaway3d", "trus" -> NsView, or -1. */
 int ns_view_parse(const char *name);
 const char *ns_view_name(NsView v);
 

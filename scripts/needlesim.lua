@@ -1136,7 +1136,7 @@ local OBSTACLE_FIELDS = { "name", "region" }
 local SEED_FIELDS = { "target" }
 local CAMERA_FIELDS = { "views", "fps", "frame_every", "cut_normal", "tet_edges",
     "friction_colours" }
-local VIEWS = { side = true, top = true, axis = true, cutaway3d = true }
+local VIEWS = { side = true, top = true, axis = true, cutaway3d = true, trus = true }
 local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold", "tip_block" }
 local ACCURACY_FIELDS = { "tip", "front" }
 local LIVE_FIELDS = { "script", "entries" }
@@ -1258,13 +1258,13 @@ local function camera_of(v, where, dt)
         c.views = { "side" }
     else
         if type(views) ~= "table" or kind_of(views) or #views < 1 or #views > 3 then
-            a:fail("views must be a list of 1 to 3 of 'side', 'top', 'axis', 'cutaway3d' (got %s)",
+            a:fail("views must be a list of 1 to 3 of 'side', 'top', 'axis', 'cutaway3d', 'trus' (got %s)",
                 describe(views))
         end
         local seen = {}
         for i, name in ipairs(views) do
             if not VIEWS[name] then
-                a:fail("views[%d] must be 'side', 'top', 'axis' or 'cutaway3d' (got %s)", i,
+                a:fail("views[%d] must be 'side', 'top', 'axis', 'cutaway3d' or 'trus' (got %s)", i,
                     describe(name))
             end
             if seen[name] then

@@ -377,7 +377,7 @@ expect_error "misspelt field in ns.scenario" 1 \
     "tests/data/bad_scenario_field.lua:2: ns.scenario: unknown field 'tisue'" -- \
     check tests/data/bad_scenario_field.lua
 expect_error "camera: unknown view" 1 \
-    "tests/data/bad_camera.lua:2: ns.scenario: camera: views[2] must be 'side', 'top', 'axis' or 'cutaway3d'" -- \
+    "tests/data/bad_camera.lua:2: ns.scenario: camera: views[2] must be 'side', 'top', 'axis', 'cutaway3d' or 'trus'" -- \
     check tests/data/bad_camera.lua
 expect_error "camera: misspelt field" 1 \
     "tests/data/bad_camera_field.lua:2: ns.scenario: camera: unknown field 'tet_edge'" \

@@ -13,6 +13,7 @@
 #include "mesh_grid.h"
 #include "ns_test.h"
 #include "scene.h"
+#include "trus.h"
 
 typedef struct Block {
     NsMesh mesh;
@@ -253,6 +254,43 @@ static int tip_where_simulated(void)
     return 0;
 }
 
+/* The trus view: the needle crossing the image plane (at the tip's depth) is a white dot whose
+ * centre lies within 3 pixels of the simulated tip projected by the probe's pose; speckle is
+ * fixed in the tissue, so two renders are the same bytes. */
+static int trus_tip_where_simulated(void)
+{
+    Block b;
+    NsFrame f;
+    int w = 640, h = 360;
+    ENSURE(open_block(&b, &f, w, h) == 0);
+    NsImage im = {0}, again = {0};
+    ENSURE(render_view(&b, &f, &im, false, NS_VIEW_TRUS) == 0);
+    ENSURE(render_view(&b, &f, &again, false, NS_VIEW_TRUS) == 0);
+    ENSURE(memcmp(im.rgb, again.rgb, (size_t)w * h * 3) == 0);
+    NsTrusPose p;
+    ns_trus_pose(&b.in, &p);
+    double px[2];
+    ENSURE(ns_trus_project(&p, w, h, b.rod + 3 * 11, px));
+    double sx = 0.0, sy = 0.0;
+    int n = 0;
+    for (int y = (int)px[1] - 12; y <= (int)px[1] + 12; y++)
+        for (int x = (int)px[0] - 12; x <= (int)px[0] + 12; x++)
+            if (x >= 0 && y >= 0 && x < w && y < h && im.rgb[3 * ((size_t)y * w + x)] == 255) {
+                sx += x + 0.5;
+                sy += y + 0.5;
+                n++;
+            }
+    ENSURE(n > 0);
+    double off = hypot(sx / n - px[0], sy / n - px[1]);
+    printf("  trus: the needle's dot %.2f px from the simulated tip (%d white pixels)\n", off, n);
+    ENSURE(off <= 3.0);
+    ns_image_free(&im);
+    ns_image_free(&again);
+    ns_frame_close(&f);
+    ns_mesh_free(&b.mesh);
+    return 0;
+}
+
 static int pixels_show_the_scene(void)
 {
     Block b;
@@ -352,5 +390,6 @@ static int pixels_show_the_scene(void)
 
 NS_TEST_MAIN({"scene_cut_in_plane", scene_cut_in_plane},
              {"tip_where_simulated", tip_where_simulated},
+             {"trus_tip_where_simulated", trus_tip_where_simulated},
              {"isodose_lines_on_their_level", isodose_lines_on_their_level},
              {"pixels_show_the_scene", pixels_show_the_scene})

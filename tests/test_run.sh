@@ -284,7 +284,7 @@ PY
     bad_cue() { refused "cue_$1" "$2" "$VC" --set bad="$1"; }
     bad_cue caption_text "video_cues.lua:9: act.caption: text must be a non-empty string"
     bad_cue slow_factor "video_cues.lua:10: act.slow_motion: factor must be a number in [1, 16]"
-    bad_cue camera_view "video_cues.lua:11: act.camera: view 1 must be \"side\", \"top\", \"axis\" or \"cutaway3d\""
+    bad_cue camera_view "video_cues.lua:11: act.camera: view 1 must be \"side\", \"top\", \"axis\", \"cutaway3d\" or \"trus\""
     bad_cue card_long "video_cues.lua:12: act.card: title must be a non-empty string of at most 200 bytes (got 201 bytes)"
     bad_cue chapter_field "video_cues.lua:13: act.chapter: unknown field 'at'"
     bad_cue raw_kind "video_cues.lua: sim.control.video[1].kind must be \"caption\""
@@ -491,7 +491,7 @@ else
     fail "--trainee/--session" "$(head -1 "$TMP/err_ids") $(head -5 "$TMP/ids.csv" | tr '\n' ' ')"
 fi
 for args in "--trainee a,b" "--session $(printf 'x%.0s' $(seq 65))" "--trainee" "--rescore" \
-    "--layout cutaway3d,trus" "--view side,top" "--no-render --view side"; do
+    "--layout cutaway3d,echo" "--view side,top" "--no-render --view side"; do
     # shellcheck disable=SC2086
     "$BIN" run "$TUT" -o "$TMP/o_ids2" $args >/dev/null 2>"$TMP/err_ids2"
     rc=$?

@@ -737,9 +737,9 @@ function act.camera(t)
             error("act.camera: views must list one to three view names", 2)
         end
         for i, v in ipairs(views) do
-            if v ~= "side" and v ~= "top" and v ~= "axis" and v ~= "cutaway3d" then
-                error(fmt("act.camera: view %d must be \"side\", \"top\", \"axis\" or " ..
-                    "\"cutaway3d\" (got %s)", i, tostring(v)), 2)
+            if v ~= "side" and v ~= "top" and v ~= "axis" and v ~= "cutaway3d" and v ~= "trus" then
+                error(fmt("act.camera: view %d must be \"side\", \"top\", \"axis\", " ..
+                    "\"cutaway3d\" or \"trus\" (got %s)", i, tostring(v)), 2)
             end
         end
     end
