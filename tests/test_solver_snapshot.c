@@ -294,7 +294,9 @@ static int factor_async_adopted_alike(void)
             ENSURE(use_factor(s[v], &m, phase + 2, out[v], yf[v]) == 0);
         }
         for (int v = 1; v < 3; v++) {
-            ENSURE(memcmp(Z[v], Z[0], (size_t)n3 * cols * sizeof *Z[0]) == 0);
+            /* Z belongs to the pending factorization until it is adopted (solver.h): at phase 0
+             * the never-written solver's may still be being written on its thread */
+            ENSURE(phase == 0 || memcmp(Z[v], Z[0], (size_t)n3 * cols * sizeof *Z[0]) == 0);
             ENSURE(memcmp(out[v], out[0], nout * sizeof *out[0]) == 0);
             ENSURE(memcmp(yf[v], yf[0], (size_t)n3 * sizeof *yf[0]) == 0);
             ENSURE(ns_solver_factor_count(s[v]) == ns_solver_factor_count(s[0]));
