@@ -35,20 +35,29 @@ static double norm3(const double *a)
 
 /* Adds the force f (3 components) to et, spread over the ball of radius R centred side * R
  * along t from the tip (side 1 ahead, -1 behind; see above), off node skip (-1: none). Returns
- * 1, or 0 when no point of the ball is in the tissue (nothing added). */
-static int spread_ball(const NsCoupled *c, const double tip[3], const double t[3], double side,
-                       int tipn, int skip, const double f[3], double *et)
+ * 1, 0 when no point of the ball is in the tissue (nothing added), -1 out of memory. */
+static int spread_ball(NsCoupled *c, const double tip[3], const double t[3], double side, int tipn,
+                       int skip, const double f[3], double *et)
 {
     const NsMesh *M = &c->tissue->mesh;
-    double R = c->params.tip_load_radius, s = R / LATTICE_N, ctr[3];
-    for (int i = 0; i < 3; i++)
+    double R = c->params.tip_load_radius, s = R / LATTICE_N, ctr[3], lo[3], hi[3];
+    for (int i = 0; i < 3; i++) {
         ctr[i] = tip[i] + side * R * t[i];
+        lo[i] = ctr[i] - R - 1e-6; /* (the widening: 1e-6 m, far over 4 tol a tet's size) */
+        hi[i] = ctr[i] + R + 1e-6;
+    }
+    /* The tets that may hold a lattice point: a point the walk from the last one cannot reach
+     * (outside the tissue, across a concave boundary) is searched for among them only. */
+    int *cand = ns_arena_push(&c->arena, (size_t)(M->tet_slots + 1) * sizeof *cand);
+    if (!cand)
+        return -1;
+    int ncand = ns_mesh_tets_in_box(M, M->x, lo, hi, cand);
     /* First pass: the total weight of the points inside the tissue, off the node skipped. */
     int hint = M->node_tets[tipn].count ? M->node_tets[tipn].items[0] : -1;
     double wsum = 0.0;
     for (int pass = 0; pass < 2; pass++) {
         if (pass == 1 && !(wsum > 0.0))
-            return 0;
+            break;
         int h = hint;
         for (int i = -LATTICE_N; i <= LATTICE_N; i++)
             for (int j = -LATTICE_N; j <= LATTICE_N; j++)
@@ -59,7 +68,7 @@ static int spread_ball(const NsCoupled *c, const double tip[3], const double t[3
                     double rho = (1.0 - r2) * (1.0 - r2),
                            q[3] = {ctr[0] + s * i, ctr[1] + s * j, ctr[2] + s * k};
                     double b[4];
-                    int te = ns_mesh_locate_in(M, M->x, q, h, 1e-9, b);
+                    int te = ns_mesh_locate_among(M, M->x, q, h, 1e-9, b, cand, ncand);
                     if (te < 0)
                         continue;
                     h = te;
@@ -77,7 +86,8 @@ static int spread_ball(const NsCoupled *c, const double tip[3], const double t[3
                     }
                 }
     }
-    return 1;
+    ns_arena_pop(&c->arena, cand);
+    return wsum > 0.0;
 }
 
 int coupled_tip_load(NsCoupled *c, const double *ext_tissue, double *f_out, double **et)
@@ -116,9 +126,13 @@ int coupled_tip_load(NsCoupled *c, const double *ext_tissue, double *f_out, doub
     double ahead[3] = {-fb * m2[0], -fb * m2[1], -fb * m2[2]},
            behind[3] = {fb * m2[0], fb * m2[1], fb * m2[2]};
     const double *tip = r->x + 3 * (n - 1);
-    if (!spread_ball(c, tip, t, 1.0, tn, tn, ahead, *et))
-        return 0; /* nothing ahead in the tissue: the tip is at the surface (left as given) */
-    if (!spread_ball(c, tip, t, -1.0, tn, -1, behind, *et)) {
+    int got = spread_ball(c, tip, t, 1.0, tn, tn, ahead, *et);
+    if (got <= 0)
+        return got; /* 0: nothing ahead in the tissue: the tip is at the surface (left as given) */
+    got = spread_ball(c, tip, t, -1.0, tn, -1, behind, *et);
+    if (got < 0)
+        return -1;
+    if (got == 0) {
         /* nothing behind in the tissue (not reached: the tip's tets are): the pair undone */
         if (ext_tissue)
             memcpy(*et, ext_tissue, nt * sizeof **et);

@@ -4,6 +4,7 @@
 #include "remesh.h"
 
 #include <math.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -53,15 +54,38 @@ int ns_mesh_locate(const NsMesh *m, const double p[3], int start, double tol, do
     return ns_mesh_locate_in(m, m->u, p, start, tol, bary);
 }
 
-int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int start, double tol,
-                      double bary[4])
+/* The search when the walk fails: the tet of cand[0..n) (every slot when cand is NULL), in
+ * increasing order, whose least barycentric coordinate of p is the greatest. */
+static int scan(const NsMesh *m, const double *X, const double p[3], double tol, double bary[4],
+                const int *cand, int n)
+{
+    double b[4];
+    int best = -1;
+    double best_min = -INFINITY;
+    for (int i = 0; i < (cand ? n : m->tet_slots); i++) {
+        int e = cand ? cand[i] : i;
+        if (!ns_mesh_tet_alive(m, e) || tet_bary(m, X, e, p, b))
+            continue;
+        if (min4(b) > best_min) {
+            best_min = min4(b);
+            best = e;
+            if (bary)
+                memcpy(bary, b, sizeof b);
+        }
+    }
+    return best_min >= -tol ? best : -1;
+}
+
+/* Walks across the face opposite the most negative coordinate from start: the tet found, or -2
+ * when the walk left the mesh (a concave boundary) or cycled. */
+static int walk(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+                double bary[4])
 {
     double b[4];
     int t = start;
     if (!ns_mesh_tet_alive(m, t))
         for (t = 0; t < m->tet_slots && !ns_mesh_tet_alive(m, t); t++)
             ;
-    /* Walk across the face opposite the most negative coordinate. */
     for (int step = 0; step < 4 * m->tet_alive + 16 && ns_mesh_tet_alive(m, t); step++) {
         if (tet_bary(m, X, t, p, b))
             break;
@@ -76,20 +100,44 @@ int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int s
         }
         t = m->tet_adj[4 * t + k];
     }
-    /* The walk left the mesh (a concave boundary) or cycled: search them all. */
-    int best = -1;
-    double best_min = -INFINITY;
+    return -2;
+}
+
+int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+                      double bary[4])
+{
+    int t = walk(m, X, p, start, tol, bary);
+    return t != -2 ? t : scan(m, X, p, tol, bary, NULL, 0);
+}
+
+int ns_mesh_locate_among(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+                         double bary[4], const int *cand, int n)
+{
+    int t = walk(m, X, p, start, tol, bary);
+    return t != -2 ? t : scan(m, X, p, tol, bary, cand, n);
+}
+
+int ns_mesh_tets_in_box(const NsMesh *m, const double *X, const double lo[3], const double hi[3],
+                        int *out)
+{
+    int n = 0;
     for (int e = 0; e < m->tet_slots; e++) {
-        if (!ns_mesh_tet_alive(m, e) || tet_bary(m, X, e, p, b))
+        if (!ns_mesh_tet_alive(m, e))
             continue;
-        if (min4(b) > best_min) {
-            best_min = min4(b);
-            best = e;
-            if (bary)
-                memcpy(bary, b, sizeof b);
+        const int *tn = m->tet_node + 4 * e;
+        bool meets = true;
+        for (int i = 0; i < 3 && meets; i++) {
+            double a = X[3 * tn[0] + i], z = a;
+            for (int k = 1; k < 4; k++) {
+                a = fmin(a, X[3 * tn[k] + i]);
+                z = fmax(z, X[3 * tn[k] + i]);
+            }
+            meets = z >= lo[i] && a <= hi[i];
         }
+        if (meets)
+            out[n++] = e;
     }
-    return best_min >= -tol ? best : -1;
+    return n;
 }
 
 /* World state (x, v, a) at barycentric b of tet t. */
