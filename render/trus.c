@@ -2,10 +2,10 @@
 #include "trus.h"
 
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
-
-#include "remesh.h"
 
 #define HALF_ANGLE (60.0 * M_PI / 180.0)
 #define STEP       2 /* pixels between samples (each fills STEP x STEP) */
@@ -147,6 +147,116 @@ static void reflector(const NsTrusPose *p, NsImage *im, int x0, int w, int h, co
                 put(im, x0 + xx, yy, 1.0);
 }
 
+/* The image plane's samples, one every STEP pixels: the region and the material point of the
+ * deformed tissue there (region -1: no tissue). */
+typedef struct Slice {
+    int gw, gh;
+    int *region;
+    double *u; /* (gw x gh x 3) */
+} Slice;
+
+/* Fills the samples that lie in tet e: the tet is cut by the plane, the cut's samples found from
+ * its bounding box, and each one's barycentric coordinates, affine in the plane's two
+ * coordinates, tested and used to interpolate the material point. */
+static void slice_tet(const NsMesh *m, int e, const NsTrusPose *p, double s, double ax, double ay,
+                      Slice *sl)
+{
+    const int *tn = m->tet_node + 4 * e;
+    double d[4], q[4][2];
+    for (int k = 0; k < 4; k++) {
+        double r[3];
+        for (int i = 0; i < 3; i++)
+            r[i] = m->x[3 * tn[k] + i] - p->apex[i];
+        d[k] = dot3(r, p->axis);
+        q[k][0] = dot3(r, p->side);
+        q[k][1] = dot3(r, p->up);
+    }
+    if (fmin(fmin(d[0], d[1]), fmin(d[2], d[3])) > 0.0 ||
+        fmax(fmax(d[0], d[1]), fmax(d[2], d[3])) < 0.0)
+        return;
+    /* the cut polygon's box: the plane's crossings of the tet's edges */
+    double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+    for (int a = 0; a < 4; a++)
+        for (int b = a; b < 4; b++) {
+            if (a == b ? d[a] != 0.0 : (d[a] < 0.0) == (d[b] < 0.0) || d[a] == d[b])
+                continue;
+            double t = a == b ? 0.0 : d[a] / (d[a] - d[b]);
+            for (int i = 0; i < 2; i++) {
+                double c = q[a][i] + t * (q[b][i] - q[a][i]);
+                lo[i] = fmin(lo[i], c);
+                hi[i] = fmax(hi[i], c);
+            }
+        }
+    if (!(lo[0] <= hi[0]))
+        return;
+    /* barycentric coordinates b_k = c_k + g_k . (x - x0) with the inverse of [x1-x0 x2-x0 x3-x0],
+     * restricted to the plane: b_k(qs, qu) = b_k(0) + qs b_k,s + qu b_k,u */
+    double e1[3][3], X0[3];
+    for (int i = 0; i < 3; i++)
+        X0[i] = m->x[3 * tn[0] + i];
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < 3; i++)
+            e1[c][i] = m->x[3 * tn[c + 1] + i] - X0[i];
+    double g[3][3]; /* rows: gradients of b_1..b_3 (cofactors / det) */
+    double det = e1[0][0] * (e1[1][1] * e1[2][2] - e1[1][2] * e1[2][1]) -
+                 e1[1][0] * (e1[0][1] * e1[2][2] - e1[0][2] * e1[2][1]) +
+                 e1[2][0] * (e1[0][1] * e1[1][2] - e1[0][2] * e1[1][1]);
+    if (!(fabs(det) > 1e-30))
+        return;
+    for (int i = 0; i < 3; i++) {
+        const double *b1 = e1[(i + 1) % 3], *b2 = e1[(i + 2) % 3];
+        g[i][0] = (b1[1] * b2[2] - b1[2] * b2[1]) / det;
+        g[i][1] = (b1[2] * b2[0] - b1[0] * b2[2]) / det;
+        g[i][2] = (b1[0] * b2[1] - b1[1] * b2[0]) / det;
+    }
+    double base[4], ds[4], du[4], r0[3];
+    for (int i = 0; i < 3; i++)
+        r0[i] = p->apex[i] - X0[i];
+    base[0] = 1.0;
+    ds[0] = du[0] = 0.0;
+    for (int k = 1; k < 4; k++) {
+        base[k] = dot3(g[k - 1], r0);
+        ds[k] = dot3(g[k - 1], p->side);
+        du[k] = dot3(g[k - 1], p->up);
+        base[0] -= base[k];
+        ds[0] -= ds[k];
+        du[0] -= du[k];
+    }
+    int x_lo = (int)ceil((ax + lo[0] * s) / STEP - 0.5),
+        x_hi = (int)floor((ax + hi[0] * s) / STEP - 0.5);
+    int y_lo = (int)ceil((ay - hi[1] * s) / STEP - 0.5),
+        y_hi = (int)floor((ay - lo[1] * s) / STEP - 0.5);
+    x_lo = x_lo < 0 ? 0 : x_lo;
+    y_lo = y_lo < 0 ? 0 : y_lo;
+    x_hi = x_hi >= sl->gw ? sl->gw - 1 : x_hi;
+    y_hi = y_hi >= sl->gh ? sl->gh - 1 : y_hi;
+    for (int gy = y_lo; gy <= y_hi; gy++) {
+        double qu = (ay - (gy + 0.5) * STEP) / s;
+        for (int gx = x_lo; gx <= x_hi; gx++) {
+            double qs = ((gx + 0.5) * STEP - ax) / s, b[4];
+            bool in = true;
+            for (int k = 0; k < 4; k++) {
+                b[k] = base[k] + qs * ds[k] + qu * du[k];
+                in &= b[k] >= -1e-9;
+            }
+            if (!in)
+                continue;
+            size_t at = (size_t)gy * sl->gw + gx;
+            sl->region[at] = m->tet_region[e];
+            for (int i = 0; i < 3; i++)
+                sl->u[3 * at + i] = b[0] * m->u[3 * tn[0] + i] + b[1] * m->u[3 * tn[1] + i] +
+                                    b[2] * m->u[3 * tn[2] + i] + b[3] * m->u[3 * tn[3] + i];
+        }
+    }
+}
+
+static void fill(NsImage *im, int x, int y, int w, double v)
+{
+    uint8_t g = (uint8_t)(255.0 * fmin(1.0, fmax(0.0, v)));
+    for (int dy = 0; dy < STEP && y + dy < im->h; dy++)
+        memset(im->rgb + 3 * ((size_t)(y + dy) * im->w + x), g, 3 * (size_t)(STEP < w ? STEP : w));
+}
+
 void ns_trus_draw(const NsSceneInput *in, NsImage *im, int x0, int w, int h)
 {
     NsTrusPose p;
@@ -154,44 +264,38 @@ void ns_trus_draw(const NsSceneInput *in, NsImage *im, int x0, int w, int h)
     double s, ax, ay;
     layout(&p, w, h, &s, &ax, &ay);
     const NsMesh *m = in->mesh;
-    int hint = -1;
-    for (int y = 0; y < h; y += STEP) {
+    Slice sl = {(w + STEP - 1) / STEP, (h + STEP - 1) / STEP, NULL, NULL};
+    size_t n = (size_t)sl.gw * sl.gh;
+    sl.region = malloc(n * sizeof *sl.region);
+    sl.u = malloc(3 * n * sizeof *sl.u);
+    for (size_t i = 0; sl.region && i < n; i++)
+        sl.region[i] = -1;
+    for (int e = 0; m && sl.region && sl.u && e < m->tet_slots; e++)
+        if (ns_mesh_tet_alive(m, e))
+            slice_tet(m, e, &p, s, ax, ay, &sl);
+    for (int gy = 0; gy < sl.gh; gy++) {
         int prev_region = -2;
-        for (int x = 0; x < w; x += STEP) {
-            double qs = (x + 0.5 * STEP - ax) / s, qu = (ay - y - 0.5 * STEP) / s;
+        for (int gx = 0; gx < sl.gw; gx++) {
+            double qs = ((gx + 0.5) * STEP - ax) / s, qu = (ay - (gy + 0.5) * STEP) / s;
             double r = hypot(qs, qu), th = atan2(qs, qu), v = 0.0;
-            if (r <= p.range && fabs(th) <= HALF_ANGLE && qu > 0.0) {
-                double wpt[3], b[4];
-                for (int i = 0; i < 3; i++)
-                    wpt[i] = p.apex[i] + qs * p.side[i] + qu * p.up[i];
-                bool boxed = true; /* (a point outside the tissue's box would be searched for in
-                                    * every tet) */
-                for (int i = 0; i < 3; i++)
-                    boxed &= wpt[i] >= in->bounds[i] && wpt[i] <= in->bounds[3 + i];
-                int e = m && boxed ? ns_mesh_locate_in(m, m->x, wpt, hint, 1e-9, b) : -1;
-                if (e >= 0) {
-                    hint = e;
-                    double u[3] = {0, 0, 0};
-                    const int *tn = m->tet_node + 4 * e;
-                    for (int k = 0; k < 4; k++)
-                        for (int i = 0; i < 3; i++)
-                            u[i] += b[k] * m->u[3 * tn[k] + i];
-                    int region = m->tet_region[e];
-                    /* speckle about the region's level, fading with depth; an interface with
-                     * the region beside it along the row bright */
-                    v = echo(in, region) * (0.35 + 1.3 * speckle(u)) * (1.0 - 0.35 * r / p.range);
-                    if (prev_region >= 0 && region != prev_region)
-                        v = fmax(v, 0.85);
-                    prev_region = region;
-                } else {
-                    prev_region = -2;
-                }
+            size_t at = (size_t)gy * sl.gw + gx;
+            int region = sl.region && sl.u ? sl.region[at] : -1;
+            if (r <= p.range && fabs(th) <= HALF_ANGLE && qu > 0.0 && region >= 0) {
+                /* speckle about the region's level, fading with depth; an interface with the
+                 * region beside it along the row bright */
+                v = echo(in, region) * (0.35 + 1.3 * speckle(sl.u + 3 * at)) *
+                    (1.0 - 0.35 * r / p.range);
+                if (prev_region >= 0 && region != prev_region)
+                    v = fmax(v, 0.85);
+                prev_region = region;
+            } else {
+                prev_region = -2;
             }
-            for (int dy = 0; dy < STEP; dy++)
-                for (int dx = 0; dx < STEP && x + dx < w; dx++)
-                    put(im, x0 + x + dx, y + dy, v);
+            fill(im, x0 + gx * STEP, gy * STEP, w - gx * STEP, v);
         }
     }
+    free(sl.region);
+    free(sl.u);
     /* the fan's edges and a tick every 10 mm of depth along them */
     for (int side = -1; side <= 1; side += 2)
         for (double r = 0.0; r <= p.range * s; r += 0.5) {
