@@ -51,6 +51,7 @@ struct NsLiveSession {
     NsLiveSnap snaps[3];
     int back, mid, front;
     bool fresh, stop_render, render_failed;
+    bool answer; /* the newest copy is the first to show a message's effect (drawn at once) */
     char render_err[512];
     int pause_epoch; /* bumped on every pause and resume: fps windows across one are dropped */
     /* the board (board_mu) */
@@ -299,6 +300,7 @@ static int take_newest(NsLiveSession *s, double until_s, bool *paused, int *epoc
         s->front = s->mid;
         s->mid = t;
         s->fresh = false;
+        s->answer = false;
     }
     *paused = s->paused;
     *epoch = s->pause_epoch;
@@ -364,13 +366,20 @@ static void *render_main(void *arg)
             win0 = now;
             win_frames = 0;
         }
-        /* the next frame a period after this one; a late frame is not caught up */
+        /* the next frame a period after this one (a late frame is not caught up), or as soon
+         * as a state answers a message, a quarter period on at the least: the trainee's input
+         * shows without waiting for the frame clock */
         next = fmax(next + period, now);
-        double wait = next - ns_wall_s();
-        if (wait > 0) {
-            struct timespec ts = {(time_t)wait, (long)((wait - floor(wait)) * 1e9)};
-            nanosleep(&ts, NULL);
-        }
+        struct timespec soonest, due;
+        abs_time(now + 0.25 * period, &soonest);
+        abs_time(next, &due);
+        pthread_mutex_lock(&s->mu);
+        while (!s->stop_render && pthread_cond_timedwait(&s->snap_cv, &s->mu, &soonest) == 0)
+            ;
+        while (!s->stop_render && !s->answer &&
+               pthread_cond_timedwait(&s->snap_cv, &s->mu, &due) == 0)
+            ;
+        pthread_mutex_unlock(&s->mu);
     }
     ns_live_render_close(&lr);
     return NULL;
@@ -404,6 +413,8 @@ static int publish(NsLiveSession *s, bool ended)
     s->mid = s->back;
     s->back = t;
     s->fresh = true;
+    for (int i = 0; i < s->mark_n; i++)
+        s->answer |= s->marks[i].step <= s->r->steps;
     pthread_cond_signal(&s->snap_cv);
     pthread_mutex_unlock(&s->mu);
     return 0;
