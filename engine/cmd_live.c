@@ -258,6 +258,8 @@ static int live_session(NsRun *r, LiveArgs *la, char *record_path, char *err, in
     rc = rc ? rc : ns_run_load(r, err, err_sz);
     if (rc == 0 && la->accuracy > 0.0)
         rc = choose_model(r, la->accuracy, la->front ? la->front : "phantom", err, err_sz);
+    else if (rc == 0 && r->spec.live_accuracy > 0.0) /* the scenario's live = {accuracy, front} */
+        rc = choose_model(r, r->spec.live_accuracy, r->spec.live_front, err, err_sz);
     rc = rc ? rc : ns_run_open_logs(r, err, err_sz);
     if (rc == 0)
         ns_run_traj_header(r);

@@ -279,6 +279,23 @@ static int read_live(const NsScenario *sc, NsRunSpec *spec, lua_State *L, int si
         return 0;
     int li = lua_gettop(L);
     spec->live_script = bool_field(L, li, "script", false);
+    if (raw_field(L, li, "accuracy") != LUA_TNIL) {
+        spec->live_accuracy = lua_isnumber(L, -1) ? lua_tonumber(L, -1) : NAN;
+        if (!in_range(spec->live_accuracy, 1e-9, 1.0)) {
+            ns_set_err(err, err_sz,
+                       "%s: ns.scenario: live.accuracy must be a number in [1e-9, 1] m", sc->where);
+            return -1;
+        }
+    }
+    lua_pop(L, 1);
+    raw_field(L, li, "front");
+    const char *front = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "phantom";
+    if (strlen(front) >= sizeof spec->live_front) {
+        ns_set_err(err, err_sz, "%s: ns.scenario: live.front: no such measured front", sc->where);
+        return -1;
+    }
+    snprintf(spec->live_front, sizeof spec->live_front, "%s", front);
+    lua_pop(L, 1);
     if (raw_field(L, li, "entries") != LUA_TTABLE)
         return 0;
     int ei = lua_gettop(L);

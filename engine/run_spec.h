@@ -86,9 +86,12 @@ typedef struct NsRunSpec {
     /* dt and the solver settings above chosen apart from the scenario (live --accuracy, or a
      * replayed log's #model): the control log records them */
     bool model_chosen;
-    /* live = {script, entries} (docs/live.md): a live session runs the script first only with
-     * live_script; {"next_needle": true} takes live_entries in turn (none: the entry above) */
+    /* live = {script, entries, accuracy, front} (docs/live.md): a live session runs the script
+     * first only with live_script; {"next_needle": true} takes live_entries in turn (none: the
+     * entry above) */
     bool live_script;
+    double live_accuracy; /* live.accuracy [m] (0: none): the live session's model, as --accuracy */
+    char live_front[32];  /* live.front: the measured front it is looked up on */
     NsEntry *live_entries;
     int live_entry_count;
     NsRunDosimetry dosimetry;

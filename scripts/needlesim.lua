@@ -1139,7 +1139,7 @@ local CAMERA_FIELDS = { "views", "fps", "frame_every", "cut_normal", "tet_edges"
 local VIEWS = { side = true, top = true, axis = true, cutaway3d = true, trus = true }
 local SOLVER_FIELDS = { "tolerance", "check_tolerance", "lazy_threshold", "tip_block" }
 local ACCURACY_FIELDS = { "tip", "front" }
-local LIVE_FIELDS = { "script", "entries" }
+local LIVE_FIELDS = { "script", "entries", "accuracy", "front" }
 local DOSIMETRY_FIELDS = { "prescription", "strength", "source", "spacing", "prostate", "urethra",
     "rectum", "plan" }
 -- sim/ns_limits.h's NS_LIMIT_DOSE_* (the engine checks them again)
@@ -1366,13 +1366,26 @@ end
 -- scenario. script = true runs the scenario's script first (a scripted set-up) and hands the
 -- needle to the trainee when it ends (default false: the trainee drives from the start);
 -- entries = {{point, direction, bevel_toward}, ...}: where each {"next_needle": true} puts
--- the next needle, in turn (default: the scenario's entry again).
+-- the next needle, in turn (default: the scenario's entry again); accuracy = TIP [m] with
+-- front = NAME ("phantom" default): the live session's dt and solver settings, the cheapest
+-- measured on that front within TIP on the scenario's own mesh (ns.economy; `needlesim live
+-- --accuracy` overrides it; `needlesim run` keeps the scenario's own).
 local function live_of(v, where)
     if v == nil then
         return nil
     end
     local a = args(v, "ns.scenario: live", where, LIVE_FIELDS)
     local l = { script = a:boolean("script", false), entries = {} }
+    l.accuracy = a:number("accuracy", GT0, "> 0 [m]", OPTIONAL)
+    l.front = a:string("front", OPTIONAL)
+    if l.front ~= nil and l.accuracy == nil then
+        a:fail("front = '%s' without accuracy: the front is where the accuracy is looked up",
+            l.front)
+    end
+    if l.accuracy ~= nil then
+        l.front = l.front or "phantom"
+        economy(l.accuracy, l.front, where, true)
+    end
     local es = a:get("entries")
     if es ~= nil then
         if type(es) ~= "table" or kind_of(es) or #es < 1 or #es > 64 then

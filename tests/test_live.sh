@@ -80,6 +80,8 @@ for k, sub in (("fps", ("median", "p5")), ("rtf", ("median", "min")),
     for s in sub:
         assert isinstance(live[k][s], (int, float)) and math.isfinite(live[k][s]), (k, s)
 assert live["clients"] >= 3, live["clients"]
+m = live["model"]  # the scenario's live = {accuracy = 0.5e-3, front = "brachytherapy"}
+assert m["chosen_by"] == "accuracy" and m["front"] == "brachytherapy" and m["dt_s"] == 0.02, m
 assert live["ended_by"] == "client", live["ended_by"]
 assert r["needle"]["depth_m"] > 0.004, r["needle"]["depth_m"]
 assert len(r["seeds"]) >= 1, r["seeds"]
@@ -204,6 +206,22 @@ rc=$?
 [ $rc -eq 1 ] && grep -q "no setting measured on the 'phantom' front" "$TMP/acc_refused.err" &&
     pass "accuracy: a bound no measured setting meets is refused" ||
     fail "accuracy: refusal" "exit $rc: $(tail -1 "$TMP/acc_refused.err")"
+
+# ---- the scenario's live = {accuracy, front}: refused at load when it cannot be met ----
+n=0
+for v in 'front = "brachytherapy"' 'accuracy = -1' 'accuracy = 1e-9, front = "brachytherapy"' \
+    'accuracy = 1e-3, front = "nope"'; do
+    n=$((n + 1))
+    sed -e "s|live = { accuracy = 0.5e-3, front = \"brachytherapy\" }|live = { $v }|" \
+        "$SRC/scenarios/tutorial.lua" >"$TMP/live_field$n.lua"
+    "$BIN" live "$TMP/live_field$n.lua" --port 0 -o "$TMP/live_field$n" >/dev/null \
+        2>"$TMP/live_field$n.err"
+    rc=$?
+    [ $rc -eq 1 ] && grep -q "live_field$n.lua:14: ns\.\(scenario: live\|economy\)" \
+        "$TMP/live_field$n.err" && [ ! -e "$TMP/live_field$n" ] &&
+        pass "live = { $v }: refused at load, the scenario's line named" ||
+        fail "live = { $v }" "exit $rc: $(tail -1 "$TMP/live_field$n.err")"
+done
 
 echo "$PASSED passed, $FAILED failed"
 [ "$FAILED" -eq 0 ]
