@@ -273,14 +273,15 @@ void ns_trus_draw(const NsSceneInput *in, NsImage *im, int x0, int w, int h)
     for (int e = 0; m && sl.region && sl.u && e < m->tet_slots; e++)
         if (ns_mesh_tet_alive(m, e))
             slice_tet(m, e, &p, s, ax, ay, &sl);
+    const double tan_half = tan(HALF_ANGLE); /* inside the fan: |qs| <= qu tan(half angle) */
     for (int gy = 0; gy < sl.gh; gy++) {
         int prev_region = -2;
         for (int gx = 0; gx < sl.gw; gx++) {
             double qs = ((gx + 0.5) * STEP - ax) / s, qu = (ay - (gy + 0.5) * STEP) / s;
-            double r = hypot(qs, qu), th = atan2(qs, qu), v = 0.0;
+            double r = sqrt(qs * qs + qu * qu), v = 0.0;
             size_t at = (size_t)gy * sl.gw + gx;
             int region = sl.region && sl.u ? sl.region[at] : -1;
-            if (r <= p.range && fabs(th) <= HALF_ANGLE && qu > 0.0 && region >= 0) {
+            if (r <= p.range && fabs(qs) <= qu * tan_half && qu > 0.0 && region >= 0) {
                 /* speckle about the region's level, fading with depth; an interface with the
                  * region beside it along the row bright */
                 v = echo(in, region) * (0.35 + 1.3 * speckle(sl.u + 3 * at)) *
