@@ -52,6 +52,7 @@ static const char run_usage[] =
     "                     [--trainee ID] [--session ID] [--rescore] [--score-row]\n"
     "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
     "                     [--height H] [--frame-every K] [--view NAME | --layout A,B]\n"
+    "                     [--samples N]\n"
     "                     [--quiet]\n"
     "                     [--checkpoint-at T FILE] [--resume FILE]\n";
 
@@ -188,6 +189,13 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
             else
                 o->height = (int)n;
             i++;
+        } else if (strcmp(a, "--samples") == 0) {
+            char *end;
+            long n = v ? strtol(v, &end, 10) : 0;
+            if (!v || *end || n < 1 || n > 16)
+                return usage_error("%s: expected a number of samples a pixel in 1..16", a);
+            o->samples = (int)n;
+            i++;
         } else if (strcmp(a, "--view") == 0 || strcmp(a, "--layout") == 0) {
             int rc = parse_views(o, a, v);
             if (rc)
@@ -239,8 +247,9 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
         return usage_error("--checkpoint-at and --resume name the same file '%s'", o->checkpoint);
     if (o->no_render && (o->frames || o->video))
         return usage_error("%s", "--no-render with --frames or --video: which is it?");
-    if (o->no_render && (o->width || o->height || o->frame_every || o->nviews))
-        return usage_error("%s", "--no-render with --width, --height, --frame-every or a view");
+    if (o->no_render && (o->width || o->height || o->frame_every || o->nviews || o->samples))
+        return usage_error("%s", "--no-render with --width, --height, --frame-every, --samples "
+                                 "or a view");
     o->width = o->width ? o->width : 1280;
     o->height = o->height ? o->height : 720;
     return 0;

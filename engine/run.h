@@ -40,7 +40,8 @@ typedef struct NsRunOpts {
     bool no_render, frames;
     const char *video;
     int width, height, frame_every; /* frame_every 0: the scenario's camera decides */
-    int views[3], nviews;           /* --view / --layout (NsView); nviews 0: the scenario's */
+    int samples;          /* --samples: OpenGL samples a pixel (0: 1, edges smoothed after) */
+    int views[3], nviews; /* --view / --layout (NsView); nviews 0: the scenario's */
     /* checkpoints (docs/checkpoints.md): --checkpoint-at T FILE, --resume FILE */
     const char *checkpoint, *resume;
     double checkpoint_at;

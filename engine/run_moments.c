@@ -63,6 +63,7 @@ int ns_run_render_setup(NsRun *r, char *err, int err_sz)
                          .summary = true,
                          .width = r->opt.width,
                          .height = r->opt.height,
+                         .samples = r->opt.samples,
                          .fps = cam->fps,
                          .nviews = cam->view_count,
                          .legend = cam->friction_colours};

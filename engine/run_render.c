@@ -172,7 +172,8 @@ int ns_run_render_open(NsRunRender *rr, const NsRunRenderOpts *o, char *err, int
             ns_cleanup_add(rr->summary_tmp) != 0)
             return -1;
     }
-    if (ns_frame_open(&rr->frame, o->width, o->height, err, err_sz))
+    if (ns_frame_open_samples(&rr->frame, o->width, o->height, o->samples ? o->samples : 1, err,
+                              err_sz))
         return -1;
     if (o->video) {
         rr->video_tmp = dup_suffix(o->video, ".part");

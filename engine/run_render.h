@@ -16,6 +16,7 @@ typedef struct NsRunRenderOpts {
     const char *video; /* an .mp4 path, or NULL */
     bool summary;      /* DIR/summary.png */
     int width, height; /* even */
+    int samples;       /* OpenGL's samples a pixel (0: 1, the edges smoothed after) */
     double fps;
     int views[3], nviews;
     bool legend; /* the friction-state colour key */

@@ -5,6 +5,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
@@ -28,6 +29,12 @@ int ns_frame_open_samples(NsFrame *f, int w, int h, int samples, char *err, int 
     f->w = w;
     f->h = h;
     int px = h / 34 < 11 ? 11 : h / 34;
+    f->samples = samples;
+    f->scratch = samples <= 1 ? malloc((size_t)w * h * 3) : NULL;
+    if (samples <= 1 && !f->scratch) {
+        snprintf(err, (size_t)err_sz, "out of memory for %dx%d frames", w, h);
+        return -1;
+    }
     f->gl = ns_renderer_open(w, h, samples, err, err_sz);
     f->font = f->gl ? ns_font_open(px, 0, err, err_sz) : NULL;
     f->small = f->font ? ns_font_open(px * 3 / 4 < 9 ? 9 : px * 3 / 4, 0, err, err_sz) : NULL;
@@ -44,6 +51,7 @@ void ns_frame_close(NsFrame *f)
     ns_font_close(f->font);
     ns_renderer_close(f->gl);
     ns_scene_free(&f->scene);
+    free(f->scratch);
     memset(f, 0, sizeof *f);
 }
 
@@ -84,8 +92,17 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
                     int err_sz)
 {
     double t0 = now_ms(), build = 0.0;
-    ns_renderer_clear(f->gl, background);
     int vw = f->w / (nviews > 0 ? nviews : 1);
+    /* the columns OpenGL draws: every view's but the ones drawn on the CPU at either end
+     * (cleared, resolved and read back; a frame of CPU views only skips OpenGL) */
+    int nv = nviews > 0 ? nviews : 0, g0 = 0, g1 = nv;
+    while (g0 < g1 && views[g0] == NS_VIEW_TRUS)
+        g0++;
+    while (g1 > g0 && views[g1 - 1] == NS_VIEW_TRUS)
+        g1--;
+    int gx = g0 * vw, gw = nv == 0 ? f->w : g1 == g0 ? 0 : (g1 == nv ? f->w : g1 * vw) - gx;
+    if (gw > 0)
+        ns_renderer_clear(f->gl, background, gx, gw);
     for (int k = 0; k < nviews; k++) {
         int x = k * vw, w = k == nviews - 1 ? f->w - x : vw;
         if (views[k] == NS_VIEW_TRUS)
@@ -107,8 +124,15 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
         if (ns_renderer_draw(f->gl, &f->scene, x, 0, w, f->h, err, err_sz))
             return -1;
     }
-    if (ns_renderer_read(f->gl, out, err, err_sz))
+    if (gw > 0 && ns_renderer_read(f->gl, out, gx, gw, err, err_sz))
         return -1;
+    if (gw > 0 && f->scratch)
+        ns_image_smooth_edges(out, gx, gw, f->scratch);
+    if (gw <= 0 && (out->w != f->w || out->h != f->h || !out->rgb)) {
+        ns_image_free(out);
+        if (ns_image_alloc(out, f->w, f->h, err, err_sz))
+            return -1;
+    }
     for (int k = 0; k < nviews; k++)
         if (views[k] == NS_VIEW_TRUS)
             ns_trus_draw(in, out, k * vw, k == nviews - 1 ? f->w - k * vw : vw, f->h);

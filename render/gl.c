@@ -308,11 +308,12 @@ const char *ns_renderer_info(const NsRenderer *r)
     return r->info;
 }
 
-void ns_renderer_clear(NsRenderer *r, const uint8_t bg[3])
+void ns_renderer_clear(NsRenderer *r, const uint8_t bg[3], int x, int w)
 {
     glBindFramebuffer(GL_FRAMEBUFFER, r->fbo_ms);
     glViewport(0, 0, r->w, r->h);
-    glDisable(GL_SCISSOR_TEST);
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(x, 0, w, r->h);
     glDepthMask(GL_TRUE);
     glClearColor(bg[0] / 255.0f, bg[1] / 255.0f, bg[2] / 255.0f, 1.0f);
     glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
@@ -395,17 +396,17 @@ int ns_renderer_draw(NsRenderer *r, const NsScene *s, int x, int y, int w, int h
     return 0;
 }
 
-int ns_renderer_read(NsRenderer *r, NsImage *im, char *err, int err_sz)
+int ns_renderer_read(NsRenderer *r, NsImage *im, int x, int w, char *err, int err_sz)
 {
     glDisable(GL_SCISSOR_TEST);
     glBindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo_ms);
     if (r->samples > 1) {
         glBindFramebuffer(GL_DRAW_FRAMEBUFFER, r->fbo_rs);
-        glBlitFramebuffer(0, 0, r->w, r->h, 0, 0, r->w, r->h, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+        glBlitFramebuffer(x, 0, x + w, r->h, x, 0, x + w, r->h, GL_COLOR_BUFFER_BIT, GL_NEAREST);
         glBindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo_rs);
     }
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    glReadPixels(0, 0, r->w, r->h, GL_RGBA, GL_UNSIGNED_BYTE, r->rgba);
+    glReadPixels(x, 0, w, r->h, GL_RGBA, GL_UNSIGNED_BYTE, r->rgba);
     glBindFramebuffer(GL_FRAMEBUFFER, r->fbo_ms);
     GLenum e = glGetError();
     if (e != GL_NO_ERROR) {
@@ -416,11 +417,12 @@ int ns_renderer_read(NsRenderer *r, NsImage *im, char *err, int err_sz)
         ns_image_free(im);
         if (ns_image_alloc(im, r->w, r->h, err, err_sz))
             return -1;
+        memset(im->rgb, 0, (size_t)r->w * r->h * 3);
     }
     for (int yy = 0; yy < r->h; yy++) { /* GL's rows run bottom-up */
-        const uint8_t *src = r->rgba + (size_t)(r->h - 1 - yy) * r->w * 4;
-        uint8_t *dst = im->rgb + (size_t)yy * r->w * 3;
-        for (int xx = 0; xx < r->w; xx++) {
+        const uint8_t *src = r->rgba + (size_t)(r->h - 1 - yy) * w * 4;
+        uint8_t *dst = im->rgb + ((size_t)yy * r->w + x) * 3;
+        for (int xx = 0; xx < w; xx++) {
             dst[3 * xx] = src[4 * xx];
             dst[3 * xx + 1] = src[4 * xx + 1];
             dst[3 * xx + 2] = src[4 * xx + 2];

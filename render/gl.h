@@ -18,13 +18,15 @@ void ns_renderer_close(NsRenderer *r);
 /* "EGL <platform>, <GL renderer string>, OpenGL <version>". */
 const char *ns_renderer_info(const NsRenderer *r);
 
-/* Clears the frame to bg. */
-void ns_renderer_clear(NsRenderer *r, const uint8_t bg[3]);
+/* Clears columns [x, x + w) of the frame to bg (the frame's other columns are left as they are:
+ * a view drawn on the CPU covers them). */
+void ns_renderer_clear(NsRenderer *r, const uint8_t bg[3], int x, int w);
 /* Draws s into the viewport (x, y, w, h) of the frame (y counted from the top). -1 on a GL
  * error (err says which). */
 int ns_renderer_draw(NsRenderer *r, const NsScene *s, int x, int y, int w, int h, char *err,
                      int err_sz);
-/* Resolves the samples and reads the frame into im (allocated to the frame's size). */
-int ns_renderer_read(NsRenderer *r, NsImage *im, char *err, int err_sz);
+/* Resolves the samples of columns [x, x + w) and reads them into im (allocated to the frame's
+ * size; where it had to be, its other columns are black). */
+int ns_renderer_read(NsRenderer *r, NsImage *im, int x, int w, char *err, int err_sz);
 
 #endif

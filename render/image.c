@@ -5,6 +5,7 @@
 #include <errno.h>
 #include <png.h>
 #include <setjmp.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -271,4 +272,50 @@ int ns_image_read_png(NsImage *im, const char *path, char *err, int err_sz)
     png_destroy_read_struct(&png, &info, NULL);
     fclose(fp);
     return 0;
+}
+
+static uint8_t luma(const uint8_t *c)
+{
+    return (uint8_t)((2 * c[0] + 5 * c[1] + c[2]) >> 3);
+}
+
+void ns_image_smooth_edges(NsImage *im, int x, int w, uint8_t *scratch)
+{
+    if (!im->rgb || x < 0 || w < 3 || x + w > im->w || im->h < 3)
+        return;
+    size_t row = (size_t)w * 3, stride = (size_t)im->w * 3;
+    /* the lumas first; then each row blended from an unchanged copy of it and of the row above
+     * (the row below is not changed yet) */
+    uint8_t *L = scratch, *prev = scratch + (size_t)w * im->h, *cur = prev + row;
+    for (int y = 0; y < im->h; y++) {
+        const uint8_t *src = im->rgb + y * stride + (size_t)x * 3;
+        for (int i = 0; i < w; i++)
+            L[(size_t)y * w + i] = luma(src + 3 * i);
+    }
+    memcpy(prev, im->rgb + (size_t)x * 3, row);
+    for (int y = 1; y + 1 < im->h; y++) {
+        uint8_t *out = im->rgb + y * stride + (size_t)x * 3;
+        const uint8_t *down = out + stride, *ly = L + (size_t)y * w;
+        memcpy(cur, out, row);
+        for (int i = 1; i + 1 < w; i++) {
+            int lc = ly[i], ln = ly[i - w], ls = ly[i + w], le = ly[i + 1], lw = ly[i - 1];
+            int lo = lc < ln ? lc : ln, hi = lc > ln ? lc : ln;
+            lo = ls < lo ? ls : lo;
+            hi = ls > hi ? ls : hi;
+            lo = le < lo ? le : lo;
+            hi = le > hi ? le : hi;
+            lo = lw < lo ? lw : lo;
+            hi = lw > hi ? lw : hi;
+            if (hi - lo < 24)
+                continue;
+            bool vertical = abs(ln + ls - 2 * lc) >= abs(le + lw - 2 * lc);
+            const uint8_t *c = cur + 3 * i, *a = vertical ? prev + 3 * i : c + 3,
+                          *b = vertical ? down + 3 * i : c - 3;
+            for (int k = 0; k < 3; k++)
+                out[3 * i + k] = (uint8_t)((2 * c[k] + a[k] + b[k] + 2) >> 2);
+        }
+        uint8_t *t = prev;
+        prev = cur;
+        cur = t;
+    }
 }

@@ -186,6 +186,10 @@ expect_error "check: two scenarios, exit 2" 2 "unexpected argument" -- \
     check scenarios/phantom_single_bend.lua scenarios/two_cylinders.lua
 expect_error "check: --mesh-out with unknown extension, exit 2" 2 "use .vtu or .msh" -- \
     check scenarios/phantom_single_bend.lua --mesh-out "$TMP/mesh.obj"
+expect_error "run: --samples 0, exit 2" 2 "expected a number of samples a pixel in 1..16" -- \
+    run scenarios/tutorial.lua --samples 0
+expect_error "run: --samples with --no-render, exit 2" 2 "--no-render with" -- \
+    run scenarios/tutorial.lua --samples 4 --no-render
 
 # ---- the shipped scenarios -----------------------------------------------------------------
 

@@ -200,13 +200,14 @@ static bool needle_blue(const uint8_t *c)
  * projected by the view's camera, and the hit target is drawn green where it is. Walking out
  * along the needle's projected line from 10 pixels behind the tip, the last needle-coloured
  * pixel (of the line or a pixel either side) is the drawn tip. */
-/* The block and a w x h renderer; 0, or -1 with a message. */
-static int open_block(Block *b, NsFrame *f, int w, int h)
+/* The block and a w x h renderer (samples a pixel: 1 is the runs' default, edges smoothed);
+ * 0, or -1 with a message. */
+static int open_block_samples(Block *b, NsFrame *f, int w, int h, int samples)
 {
     char err[256];
     if (block_init(b) != 0)
         return -1;
-    if (ns_frame_open(f, w, h, err, sizeof err)) {
+    if (ns_frame_open_samples(f, w, h, samples, err, sizeof err)) {
         fprintf(stderr, "%s\n", err);
         ns_mesh_free(&b->mesh);
         return -1;
@@ -214,43 +215,77 @@ static int open_block(Block *b, NsFrame *f, int w, int h)
     return 0;
 }
 
+static int open_block(Block *b, NsFrame *f, int w, int h)
+{
+    return open_block_samples(b, f, w, h, 4);
+}
+
+/* With 4 samples a pixel, and with 1 and the edges smoothed (needlesim run's default). */
 static int tip_where_simulated(void)
 {
-    Block b;
-    NsFrame f;
-    int w = 640, h = 360;
-    ENSURE(open_block(&b, &f, w, h) == 0);
-    NsImage im = {0};
-    const NsView views[2] = {NS_VIEW_SIDE, NS_VIEW_CUTAWAY3D};
-    for (int v = 0; v < 2; v++) {
-        ENSURE(render_view(&b, &f, &im, false, views[v]) == 0);
-        NsCamera cam;
-        ns_scene_camera(&b.in, views[v], (double)w / h, &cam);
-        const double *tip = b.rod + 3 * 11;
-        double back[3] = {tip[0] - 0.005, tip[1], tip[2]}, pt[2], pb[2];
-        ENSURE(ns_camera_project(&cam, w, h, tip, pt) && ns_camera_project(&cam, w, h, back, pb));
-        double d[2] = {pt[0] - pb[0], pt[1] - pb[1]}, len = hypot(d[0], d[1]);
-        ENSURE(len > 5.0);
-        d[0] /= len;
-        d[1] /= len;
-        double last = -100.0;
-        for (double s = -10.0; s <= 15.0; s += 0.25)
-            for (int side = -1; side <= 1; side++) {
-                int x = (int)floor(pt[0] + s * d[0] - side * d[1]);
-                int y = (int)floor(pt[1] + s * d[1] + side * d[0]);
-                if (x >= 0 && y >= 0 && x < w && y < h &&
-                    needle_blue(im.rgb + 3 * ((size_t)y * w + x)))
-                    last = s;
-            }
-        printf("  %s: the drawn tip %.2f px from the simulated one along the needle\n",
-               ns_view_name(views[v]), last);
-        ENSURE(fabs(last) <= 3.0);
-        const uint8_t *g = pixel(&im, &cam, w, h, 0, b.target_x);
-        ENSURE(g && g[1] > g[0] + 40 && g[1] > g[2] + 40);
+    for (int samples = 4; samples >= 1; samples -= 3) {
+        printf("  %d sample(s) a pixel\n", samples);
+        Block b;
+        NsFrame f;
+        int w = 640, h = 360;
+        ENSURE(open_block_samples(&b, &f, w, h, samples) == 0);
+        NsImage im = {0};
+        const NsView views[2] = {NS_VIEW_SIDE, NS_VIEW_CUTAWAY3D};
+        for (int v = 0; v < 2; v++) {
+            ENSURE(render_view(&b, &f, &im, false, views[v]) == 0);
+            NsCamera cam;
+            ns_scene_camera(&b.in, views[v], (double)w / h, &cam);
+            const double *tip = b.rod + 3 * 11;
+            double back[3] = {tip[0] - 0.005, tip[1], tip[2]}, pt[2], pb[2];
+            ENSURE(ns_camera_project(&cam, w, h, tip, pt) &&
+                   ns_camera_project(&cam, w, h, back, pb));
+            double d[2] = {pt[0] - pb[0], pt[1] - pb[1]}, len = hypot(d[0], d[1]);
+            ENSURE(len > 5.0);
+            d[0] /= len;
+            d[1] /= len;
+            double last = -100.0;
+            for (double s = -10.0; s <= 15.0; s += 0.25)
+                for (int side = -1; side <= 1; side++) {
+                    int x = (int)floor(pt[0] + s * d[0] - side * d[1]);
+                    int y = (int)floor(pt[1] + s * d[1] + side * d[0]);
+                    if (x >= 0 && y >= 0 && x < w && y < h &&
+                        needle_blue(im.rgb + 3 * ((size_t)y * w + x)))
+                        last = s;
+                }
+            printf("  %s: the drawn tip %.2f px from the simulated one along the needle\n",
+                   ns_view_name(views[v]), last);
+            ENSURE(fabs(last) <= 3.0);
+            const uint8_t *g = pixel(&im, &cam, w, h, 0, b.target_x);
+            ENSURE(g && g[1] > g[0] + 40 && g[1] > g[2] + 40);
+        }
+        ns_image_free(&im);
+        ns_frame_close(&f);
+        ns_mesh_free(&b.mesh);
     }
+    return 0;
+}
+
+/* The smoothing of 1-sample frames: a hard edge's pixels take half their neighbours' across
+ * it, a flat area and the columns outside are untouched. */
+static int smooth_edges_blend_across(void)
+{
+    char err[128];
+    NsImage im = {0};
+    ENSURE(ns_image_alloc(&im, 8, 6, err, sizeof err) == 0);
+    for (int y = 0; y < 6; y++)
+        for (int x = 0; x < 8; x++)
+            memset(im.rgb + 3 * (y * 8 + x), x >= 4 ? 200 : 40, 3);
+    uint8_t scratch[8 * 6 * 3];
+    ns_image_smooth_edges(&im, 1, 6, scratch);
+    /* x = 3 (40, its east neighbour 200): (2 * 40 + 200 + 40) / 4 = 80; x = 4: (400 + 240) / 4 */
+    for (int y = 1; y < 5; y++) {
+        ENSURE(im.rgb[3 * (y * 8 + 3)] == 80 && im.rgb[3 * (y * 8 + 4)] == 160);
+        ENSURE(im.rgb[3 * (y * 8 + 2)] == 40 && im.rgb[3 * (y * 8 + 5)] == 200);
+    }
+    ENSURE(im.rgb[3 * (0 * 8 + 3)] == 40 && im.rgb[3 * (5 * 8 + 4)] == 200); /* edge rows */
+    ns_image_smooth_edges(&im, 5, 3, scratch); /* the columns 5..7: flat, unchanged */
+    ENSURE(im.rgb[3 * (2 * 8 + 5)] == 200 && im.rgb[3 * (2 * 8 + 6)] == 200);
     ns_image_free(&im);
-    ns_frame_close(&f);
-    ns_mesh_free(&b.mesh);
     return 0;
 }
 
@@ -391,5 +426,6 @@ static int pixels_show_the_scene(void)
 NS_TEST_MAIN({"scene_cut_in_plane", scene_cut_in_plane},
              {"tip_where_simulated", tip_where_simulated},
              {"trus_tip_where_simulated", trus_tip_where_simulated},
+             {"smooth_edges_blend_across", smooth_edges_blend_across},
              {"isodose_lines_on_their_level", isodose_lines_on_their_level},
              {"pixels_show_the_scene", pixels_show_the_scene})
