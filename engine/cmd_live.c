@@ -175,7 +175,8 @@ static int parse_args(int argc, char **argv, LiveArgs *la)
 /* --accuracy: the cheapest setting on the named front (scripts/needlesim/fronts.lua) measured
  * on the scenario's own mesh whose tip error is within tip, as the scenario's accuracy field
  * chooses (docs/performance.md); it replaces the scenario's dt and solver settings. */
-static int choose_model(NsRun *r, double tip, const char *front, char *err, int err_sz)
+static int choose_model(NsRun *r, double tip, const char *front, bool from_scenario, char *err,
+                        int err_sz)
 {
     lua_State *L = ns_lua_state(r->sc.lua);
     int top = lua_gettop(L);
@@ -183,7 +184,8 @@ static int choose_model(NsRun *r, double tip, const char *front, char *err, int 
     lua_pushstring(L, "needlesim.fronts");
     if (lua_pcall(L, 1, 1, 0) != LUA_OK || !lua_istable(L, -1) ||
         lua_getfield(L, -1, front) != LUA_TTABLE) {
-        ns_set_err(err, err_sz, "needlesim live: --front '%s': no such measured front", front);
+        ns_set_err(err, err_sz, "needlesim live: %s '%s': no such measured front",
+                   from_scenario ? "the scenario's live.front" : "--front", front);
         lua_settop(L, top);
         return -1;
     }
@@ -221,9 +223,9 @@ static int choose_model(NsRun *r, double tip, const char *front, char *err, int 
     lua_settop(L, top);
     if (!found)
         ns_set_err(err, err_sz,
-                   "needlesim live: --accuracy %g m: no setting measured on the '%s' front "
+                   "needlesim live: %s %g m: no setting measured on the '%s' front "
                    "reaches it on the scenario's own mesh (the best is %g m; docs/performance.md)",
-                   tip, front, best);
+                   from_scenario ? "the scenario's live.accuracy" : "--accuracy", tip, front, best);
     return found ? 0 : -1;
 }
 
@@ -257,9 +259,9 @@ static int live_session(NsRun *r, LiveArgs *la, char *record_path, char *err, in
         return -2;
     rc = rc ? rc : ns_run_load(r, err, err_sz);
     if (rc == 0 && la->accuracy > 0.0)
-        rc = choose_model(r, la->accuracy, la->front ? la->front : "phantom", err, err_sz);
+        rc = choose_model(r, la->accuracy, la->front ? la->front : "phantom", false, err, err_sz);
     else if (rc == 0 && r->spec.live_accuracy > 0.0) /* the scenario's live = {accuracy, front} */
-        rc = choose_model(r, r->spec.live_accuracy, r->spec.live_front, err, err_sz);
+        rc = choose_model(r, r->spec.live_accuracy, r->spec.live_front, true, err, err_sz);
     rc = rc ? rc : ns_run_open_logs(r, err, err_sz);
     if (rc == 0)
         ns_run_traj_header(r);

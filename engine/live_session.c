@@ -51,7 +51,8 @@ struct NsLiveSession {
     NsLiveSnap snaps[3];
     int back, mid, front;
     bool fresh, stop_render, render_failed;
-    bool answer; /* the newest copy is the first to show a message's effect (drawn at once) */
+    bool answer;     /* the newest copy is the first to show a message's effect (drawn at once) */
+    long shown_step; /* the step of the copy the renderer took last */
     char render_err[512];
     int pause_epoch; /* bumped on every pause and resume: fps windows across one are dropped */
     /* the board (board_mu) */
@@ -301,6 +302,7 @@ static int take_newest(NsLiveSession *s, double until_s, bool *paused, int *epoc
         s->mid = t;
         s->fresh = false;
         s->answer = false;
+        s->shown_step = s->snaps[s->front].step;
     }
     *paused = s->paused;
     *epoch = s->pause_epoch;
@@ -413,8 +415,8 @@ static int publish(NsLiveSession *s, bool ended)
     s->mid = s->back;
     s->back = t;
     s->fresh = true;
-    for (int i = 0; i < s->mark_n; i++)
-        s->answer |= s->marks[i].step <= s->r->steps;
+    for (int i = 0; i < s->mark_n; i++) /* (marks the frame being drawn shows are not news) */
+        s->answer |= s->marks[i].step <= s->r->steps && s->marks[i].step > s->shown_step;
     pthread_cond_signal(&s->snap_cv);
     pthread_mutex_unlock(&s->mu);
     return 0;

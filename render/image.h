@@ -31,10 +31,10 @@ void ns_image_fill_rect(NsImage *im, int x, int y, int w, int h, const uint8_t r
 void ns_image_blit_scaled(NsImage *dst, int x, int y, int w, int h, const NsImage *src);
 
 /* Softens the stair steps of an unsampled rasterization in columns [x, x + w) (rows 1 .. h-2):
- * where a pixel's luma differs from its four neighbours' by 24 or more, it is averaged half and
+ * where the lumas of a pixel and its four neighbours span 24 or more, it is averaged half and
  * half with the two neighbours across the edge (the direction whose second difference is larger).
  * A cheap stand-in for multisampling, which costs llvmpipe about as much as the rest of a frame
- * (docs/rendering.md). scratch: w * h * 3 bytes of the caller's. */
+ * (docs/rendering.md). scratch: w * h + 6 w bytes of the caller's (w * h * 3 holds it). */
 void ns_image_smooth_edges(NsImage *im, int x, int w, uint8_t *scratch);
 
 /* Writes im as an 8-bit RGB PNG to exactly path (no temporary name; the caller handles that).

@@ -222,14 +222,15 @@ static void slice_tet(const NsMesh *m, int e, const NsTrusPose *p, double s, dou
         ds[0] -= ds[k];
         du[0] -= du[k];
     }
-    int x_lo = (int)ceil((ax + lo[0] * s) / STEP - 0.5),
-        x_hi = (int)floor((ax + hi[0] * s) / STEP - 0.5);
-    int y_lo = (int)ceil((ay - hi[1] * s) / STEP - 0.5),
-        y_hi = (int)floor((ay - lo[1] * s) / STEP - 0.5);
-    x_lo = x_lo < 0 ? 0 : x_lo;
-    y_lo = y_lo < 0 ? 0 : y_lo;
-    x_hi = x_hi >= sl->gw ? sl->gw - 1 : x_hi;
-    y_hi = y_hi >= sl->gh ? sl->gh - 1 : y_hi;
+    /* the samples in the box (with a little slack: a sample on a face two tets share is kept by
+     * the barycentric test, not lost to the boxes' rounding), clamped before the casts */
+    double box[4] = {
+        ceil((ax + lo[0] * s) / STEP - 0.5 - 1e-6), floor((ax + hi[0] * s) / STEP - 0.5 + 1e-6),
+        ceil((ay - hi[1] * s) / STEP - 0.5 - 1e-6), floor((ay - lo[1] * s) / STEP - 0.5 + 1e-6)};
+    int x_lo = (int)fmax(0.0, fmin(box[0], sl->gw)),
+        x_hi = (int)fmax(-1.0, fmin(box[1], sl->gw - 1));
+    int y_lo = (int)fmax(0.0, fmin(box[2], sl->gh)),
+        y_hi = (int)fmax(-1.0, fmin(box[3], sl->gh - 1));
     for (int gy = y_lo; gy <= y_hi; gy++) {
         double qu = (ay - (gy + 0.5) * STEP) / s;
         for (int gx = x_lo; gx <= x_hi; gx++) {

@@ -1376,7 +1376,8 @@ local function live_of(v, where)
     end
     local a = args(v, "ns.scenario: live", where, LIVE_FIELDS)
     local l = { script = a:boolean("script", false), entries = {} }
-    l.accuracy = a:number("accuracy", GT0, "> 0 [m]", OPTIONAL)
+    l.accuracy = a:number("accuracy", function(x) return x >= 1e-9 and x <= 1 end,
+        "in [1e-9, 1] [m]", OPTIONAL)
     l.front = a:string("front", OPTIONAL)
     if l.front ~= nil and l.accuracy == nil then
         a:fail("front = '%s' without accuracy: the front is where the accuracy is looked up",

@@ -43,7 +43,7 @@ static int spread_ball(NsCoupled *c, const double tip[3], const double t[3], dou
     double R = c->params.tip_load_radius, s = R / LATTICE_N, ctr[3], lo[3], hi[3];
     for (int i = 0; i < 3; i++) {
         ctr[i] = tip[i] + side * R * t[i];
-        lo[i] = ctr[i] - R - 1e-6; /* (the widening: 1e-6 m, far over 4 tol a tet's size) */
+        lo[i] = ctr[i] - R - 1e-6; /* (the widening: 1e-6 m, far over 3 tol a tet's size) */
         hi[i] = ctr[i] + R + 1e-6;
     }
     /* The tets that may hold a lattice point: a point the walk from the last one cannot reach
@@ -51,7 +51,7 @@ static int spread_ball(NsCoupled *c, const double tip[3], const double t[3], dou
     int *cand = ns_arena_push(&c->arena, (size_t)(M->tet_slots + 1) * sizeof *cand);
     if (!cand)
         return -1;
-    int ncand = ns_mesh_tets_in_box(M, M->x, lo, hi, cand);
+    int ncand = -1; /* found at the first point the walk cannot reach */
     /* First pass: the total weight of the points inside the tissue, off the node skipped. */
     int hint = M->node_tets[tipn].count ? M->node_tets[tipn].items[0] : -1;
     double wsum = 0.0;
@@ -68,7 +68,12 @@ static int spread_ball(NsCoupled *c, const double tip[3], const double t[3], dou
                     double rho = (1.0 - r2) * (1.0 - r2),
                            q[3] = {ctr[0] + s * i, ctr[1] + s * j, ctr[2] + s * k};
                     double b[4];
-                    int te = ns_mesh_locate_among(M, M->x, q, h, 1e-9, b, cand, ncand);
+                    int te = ns_mesh_walk(M, M->x, q, h, 1e-9, b);
+                    if (te == -2) {
+                        if (ncand < 0)
+                            ncand = ns_mesh_tets_in_box(M, M->x, lo, hi, cand);
+                        te = ns_mesh_search_among(M, M->x, q, 1e-9, b, cand, ncand);
+                    }
                     if (te < 0)
                         continue;
                     h = te;

@@ -78,8 +78,8 @@ static int scan(const NsMesh *m, const double *X, const double p[3], double tol,
 
 /* Walks across the face opposite the most negative coordinate from start: the tet found, or -2
  * when the walk left the mesh (a concave boundary) or cycled. */
-static int walk(const NsMesh *m, const double *X, const double p[3], int start, double tol,
-                double bary[4])
+int ns_mesh_walk(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+                 double bary[4])
 {
     double b[4];
     int t = start;
@@ -106,15 +106,14 @@ static int walk(const NsMesh *m, const double *X, const double p[3], int start, 
 int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int start, double tol,
                       double bary[4])
 {
-    int t = walk(m, X, p, start, tol, bary);
+    int t = ns_mesh_walk(m, X, p, start, tol, bary);
     return t != -2 ? t : scan(m, X, p, tol, bary, NULL, 0);
 }
 
-int ns_mesh_locate_among(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+int ns_mesh_search_among(const NsMesh *m, const double *X, const double p[3], double tol,
                          double bary[4], const int *cand, int n)
 {
-    int t = walk(m, X, p, start, tol, bary);
-    return t != -2 ? t : scan(m, X, p, tol, bary, cand, n);
+    return scan(m, X, p, tol, bary, cand, n);
 }
 
 int ns_mesh_tets_in_box(const NsMesh *m, const double *X, const double lo[3], const double hi[3],

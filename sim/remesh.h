@@ -72,14 +72,17 @@ int ns_mesh_locate_in(const NsMesh *m, const double *X, const double p[3], int s
                       double bary[4]);
 /* The tets alive whose box meets the box [lo, hi] of coordinates X, in increasing order, into
  * out (room for m->tet_slots); returns their count. A tet whose barycentric coordinates of p
- * are all >= -tol lies within 4 tol times its own extent of p along each axis, so it meets any
+ * are all >= -tol lies within 3 tol times its own extent of p along each axis, so it meets any
  * box that holds p widened by that much. */
 int ns_mesh_tets_in_box(const NsMesh *m, const double *X, const double lo[3], const double hi[3],
                         int *out);
-/* ns_mesh_locate_in with the full search confined to cand[0..n) (increasing): the same answer
- * when cand holds every tet that meets such a box about p (ns_mesh_tets_in_box), since only
- * those can hold p within tol. */
-int ns_mesh_locate_among(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+/* ns_mesh_locate_in's two parts: the walk alone (the tet, or -2 when it left the mesh or
+ * cycled), and the search that follows it, confined to cand[0..n) (increasing): the same answer
+ * as the full search when cand holds every tet that meets such a box about p
+ * (ns_mesh_tets_in_box), since only those can hold p within tol. */
+int ns_mesh_walk(const NsMesh *m, const double *X, const double p[3], int start, double tol,
+                 double bary[4]);
+int ns_mesh_search_among(const NsMesh *m, const double *X, const double p[3], double tol,
                          double bary[4], const int *cand, int n);
 
 /* Splits the simplex of k nodes (2: edge, 3: face, 4: tet; every tet containing them) at
