@@ -25,14 +25,16 @@ static int reserve(void **p, int *cap, int n, size_t sz)
     return 0;
 }
 
-/* The tissue: world positions every step, the tets when the topology changed. */
+/* The tissue: world positions every step; the tets and the nodes' material points (the trus
+ * view's speckle) when the topology changed. */
 static int take_mesh(NsLiveSnap *s, const NsMesh *M)
 {
     NsMesh *m = &s->mesh;
-    int nc = s->node_cap;
-    if (reserve((void **)&m->x, &nc, M->node_slots, 3 * sizeof *m->x))
+    int nc = s->node_cap, nu = s->node_cap;
+    if (reserve((void **)&m->x, &nc, M->node_slots, 3 * sizeof *m->x) ||
+        reserve((void **)&m->u, &nu, M->node_slots, 3 * sizeof *m->u))
         return -1;
-    s->node_cap = nc;
+    s->node_cap = nc < nu ? nc : nu;
     memcpy(m->x, M->x, (size_t)M->node_slots * 3 * sizeof *m->x);
     m->node_slots = M->node_slots;
     if (m->tet_node && s->topology == M->topology_version && m->tet_slots == M->tet_slots)
@@ -46,6 +48,7 @@ static int take_mesh(NsLiveSnap *s, const NsMesh *M)
     memcpy(m->tet_node, M->tet_node, (size_t)M->tet_slots * 4 * sizeof(int));
     memcpy(m->tet_adj, M->tet_adj, (size_t)M->tet_slots * 4 * sizeof(int));
     memcpy(m->tet_region, M->tet_region, (size_t)M->tet_slots * sizeof(int));
+    memcpy(m->u, M->u, (size_t)M->node_slots * 3 * sizeof *m->u);
     m->tet_slots = M->tet_slots;
     s->topology = M->topology_version;
     return 0;
@@ -149,6 +152,7 @@ int ns_live_snap_take(NsLiveSnap *s, NsRun *r, const NsLiveEvent *events, int ev
 void ns_live_snap_free(NsLiveSnap *s)
 {
     free(s->mesh.x);
+    free(s->mesh.u);
     free(s->mesh.tet_node);
     free(s->mesh.tet_adj);
     free(s->mesh.tet_region);
@@ -300,8 +304,10 @@ int ns_live_render_draw(NsLiveRender *lr, const NsLiveSnap *s, double fps, doubl
              s->score, s->seeds, s->seeds_planned, s->rtf, fps);
     const char *hud[4] = {l0, l1, l2, l3};
     double t0 = ns_wall_s();
-    if (ns_frame_render(&lr->frame, &in, sp->camera.views, sp->camera.view_count, hud, 4,
-                        sp->camera.friction_colours, &lr->image, err, err_sz))
+    const int *views = lr->nviews > 0 ? lr->views : sp->camera.views;
+    int nviews = lr->nviews > 0 ? lr->nviews : sp->camera.view_count;
+    if (ns_frame_render(&lr->frame, &in, views, nviews, hud, 4, sp->camera.friction_colours,
+                        &lr->image, err, err_sz))
         return -1;
     double t1 = ns_wall_s();
     if (ns_jpeg_encode(&lr->image, lr->quality, &lr->jpeg, err, err_sz))

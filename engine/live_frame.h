@@ -63,6 +63,7 @@ typedef struct NsLiveRender {
     char *json;
     size_t json_n;
     int quality;
+    int views[3], nviews; /* the views the trainee chose ({"views": ...}); 0: the scenario's */
     /* what does not change during a session (read-only in the run) */
     const NsRun *run;
 } NsLiveRender;

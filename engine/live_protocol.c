@@ -10,6 +10,7 @@
 
 #include "json.h"
 #include "ns_limits.h"
+#include "scene.h"
 
 typedef struct Cur {
     const char *p, *end;
@@ -86,7 +87,7 @@ static int parse_string(Cur *c, char *out, size_t out_sz)
         if (n + 1 < out_sz)
             out[n++] = (char)ch;
         else
-            return fail(c, "key too long");
+            return fail(c, "string too long");
     }
     out[n] = '\0';
     return 0;
@@ -174,8 +175,34 @@ static int parse_vec3(Cur *c, const char *key, double v[3])
     return 0;
 }
 
-static const char *const keys[8] = {"insert_speed", "twist_rate",  "twist", "base_velocity",
-                                    "drop_seed",    "next_needle", "pause", "end"};
+/* "A[,B[,C]]": the views side by side, as --layout takes them; "": the scenario's own. */
+static int parse_views(Cur *c, const char *key, NsLiveMsg *m)
+{
+    char names[64];
+    if (c->p >= c->end || *c->p != '"')
+        return fail(c, "%s: expected a string of view names, \"cutaway3d,trus\"", key);
+    if (parse_string(c, names, sizeof names))
+        return -1;
+    m->nviews = 0;
+    if (names[0] == '\0') /* "": the scenario's own views again */
+        return 0;
+    for (char *save = NULL, *t = strtok_r(names, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        int v = ns_view_parse(t);
+        if (v < 0)
+            return fail(c, "%s: '%s' is not a view (side, top, axis, cutaway3d, trus)", key, t);
+        if (m->nviews == 3)
+            return fail(c, "%s: at most three views", key);
+        m->views[m->nviews++] = v;
+    }
+    if (m->nviews == 0)
+        return fail(c, "%s: expected one to three view names", key);
+    return 0;
+}
+
+enum { KEYS = 9 };
+static const char *const keys[KEYS] = {"insert_speed",  "twist_rate", "twist",
+                                       "base_velocity", "drop_seed",  "next_needle",
+                                       "pause",         "end",        "views"};
 
 /* One member's value for key index k. */
 static int parse_value(Cur *c, int k, NsLiveMsg *m)
@@ -204,8 +231,10 @@ static int parse_value(Cur *c, int k, NsLiveMsg *m)
         return parse_bool(c, key, &m->next_needle);
     case 6:
         return parse_bool(c, key, &m->pause);
-    default:
+    case 7:
         return parse_bool(c, key, &m->end);
+    default:
+        return parse_views(c, key, m);
     }
 }
 
@@ -230,9 +259,9 @@ int ns_live_parse(const char *text, size_t n, NsLiveMsg *m, char *err, int err_s
         if (parse_string(&c, key, sizeof key))
             return -1;
         int k = 0;
-        while (k < 8 && strcmp(key, keys[k]) != 0)
+        while (k < KEYS && strcmp(key, keys[k]) != 0)
             k++;
-        if (k == 8)
+        if (k == KEYS)
             return fail(&c, "unknown key '%s'", key);
         if (m->has & (1u << k))
             return fail(&c, "key '%s' given twice", key);

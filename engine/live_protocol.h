@@ -3,13 +3,16 @@
  *
  *     {"insert_speed": m/s}   {"twist_rate": rad/s}   {"twist": rad}
  *     {"base_velocity": [vx, vy, vz]}   {"drop_seed": true}   {"next_needle": true}
- *     {"pause": bool}   {"end": true}
+ *     {"pause": bool}   {"end": true}   {"views": "cutaway3d,trus"}
  *
  * Every message is untrusted (docs/reliability.md): the parser is a strict subset of JSON (RFC
  * 8259) for exactly these shapes. At most NS_LIMIT_LIVE_MESSAGE_BYTES bytes, one object, known
  * keys only, each once, numbers finite and within sim/ns_limits.h's control limits, nothing
- * nested but base_velocity's array of three numbers. Anything else is an error, and the whole
- * message is ignored: a message is applied in full or not at all. */
+ * nested but base_velocity's array of three numbers; views is 1 to 3 view names (as --layout
+ * takes them), or "" for the scenario's own. views changes what the frames show, never the physics,
+ * and is not logged. Anything else is an error, and the whole message is ignored: a message is
+ * applied in full or not at all.
+ */
 #ifndef NS_LIVE_PROTOCOL_H
 #define NS_LIVE_PROTOCOL_H
 
@@ -25,6 +28,7 @@ enum {
     NS_LIVE_NEXT_NEEDLE = 1 << 5,
     NS_LIVE_PAUSE = 1 << 6,
     NS_LIVE_END = 1 << 7,
+    NS_LIVE_VIEWS = 1 << 8,
 };
 
 typedef struct NsLiveMsg {
@@ -34,6 +38,7 @@ typedef struct NsLiveMsg {
     double twist;            /* [rad]: a turn by this angle, signed */
     double base_velocity[3]; /* [m/s] */
     bool drop_seed, next_needle, pause, end;
+    int views[3], nviews; /* NsView values side by side */
 } NsLiveMsg;
 
 /* Parses one message of n bytes (not NUL-terminated; NUL bytes are an error). Returns 0, or -1

@@ -51,8 +51,10 @@ struct NsLiveSession {
     NsLiveSnap snaps[3];
     int back, mid, front;
     bool fresh, stop_render, render_failed;
-    bool answer;     /* the newest copy is the first to show a message's effect (drawn at once) */
-    long shown_step; /* the step of the copy the renderer took last */
+    bool answer; /* the newest copy is the first to show a message's effect (drawn at once) */
+    bool redraw; /* the views changed: the front copy drawn again */
+    int views[3], nviews; /* {"views": ...}: what the frames show (0: the scenario's views) */
+    long shown_step;      /* the step of the copy the renderer took last */
     char render_err[512];
     int pause_epoch; /* bumped on every pause and resume: fps windows across one are dropped */
     /* the board (board_mu) */
@@ -140,7 +142,7 @@ int ns_live_session_control(NsLiveSession *s, const NsLiveMsg *m, double arrival
     if (s->end || s->over) {
         ns_set_err(err, err_sz, "the session has ended");
         rc = -1;
-    } else if (s->scripted && (m->has & ~(unsigned)(NS_LIVE_PAUSE | NS_LIVE_END))) {
+    } else if (s->scripted && (m->has & ~(unsigned)(NS_LIVE_PAUSE | NS_LIVE_END | NS_LIVE_VIEWS))) {
         ns_set_err(err, err_sz, "the scenario's script drives the needle until its set-up ends");
         rc = -1;
     } else if ((m->has & NS_LIVE_DROP_SEED) && m->drop_seed && s->seeds_pending >= 8) {
@@ -148,7 +150,13 @@ int ns_live_session_control(NsLiveSession *s, const NsLiveMsg *m, double arrival
         rc = -1;
     }
     if (rc == 0) {
-        bool steps = m->has & ~(unsigned)(NS_LIVE_PAUSE | NS_LIVE_END);
+        bool steps = m->has & ~(unsigned)(NS_LIVE_PAUSE | NS_LIVE_END | NS_LIVE_VIEWS);
+        if (m->has & NS_LIVE_VIEWS) { /* the frames only: not a control, not logged */
+            memcpy(s->views, m->views, sizeof s->views);
+            s->nviews = m->nviews;
+            s->redraw = true;
+            pthread_cond_broadcast(&s->snap_cv);
+        }
         if (m->has & NS_LIVE_INSERT_SPEED)
             s->insert_speed = m->insert_speed;
         if (m->has & NS_LIVE_TWIST_RATE)
@@ -286,16 +294,20 @@ static void latency_marks(NsLiveSession *s, long step, double now)
     pthread_mutex_unlock(&s->mu);
 }
 
-/* Takes the newest copy (front), waiting up to `until` for one. 1: taken, 0: none, -1: stop. */
-static int take_newest(NsLiveSession *s, double until_s, bool *paused, int *epoch)
+/* Takes the newest copy (front), waiting up to `until` for one, and the views to draw it in
+ * (lr). 1: taken (or the views changed: the front copy again), 0: none, -1: stop. */
+static int take_newest(NsLiveSession *s, double until_s, bool *paused, int *epoch, NsLiveRender *lr)
 {
     struct timespec until;
     abs_time(until_s, &until);
     pthread_mutex_lock(&s->mu);
-    while (!s->fresh && !s->stop_render)
+    while (!s->fresh && !s->redraw && !s->stop_render)
         if (pthread_cond_timedwait(&s->snap_cv, &s->mu, &until) == ETIMEDOUT)
             break;
-    int rc = s->fresh ? 1 : s->stop_render ? -1 : 0;
+    int rc = s->fresh || s->redraw ? 1 : s->stop_render ? -1 : 0;
+    s->redraw = false;
+    memcpy(lr->views, s->views, sizeof lr->views);
+    lr->nviews = s->nviews;
     if (s->fresh) {
         int t = s->front;
         s->front = s->mid;
@@ -332,7 +344,7 @@ static void *render_main(void *arg)
     int win_epoch = -1;
     for (;;) {
         bool paused;
-        int epoch, got = take_newest(s, ns_wall_s() + 0.5, &paused, &epoch);
+        int epoch, got = take_newest(s, ns_wall_s() + 0.5, &paused, &epoch, &lr);
         if (got < 0)
             break;
         if (got == 0)
@@ -378,7 +390,7 @@ static void *render_main(void *arg)
         pthread_mutex_lock(&s->mu);
         while (!s->stop_render && pthread_cond_timedwait(&s->snap_cv, &s->mu, &soonest) == 0)
             ;
-        while (!s->stop_render && !s->answer &&
+        while (!s->stop_render && !s->answer && !s->redraw &&
                pthread_cond_timedwait(&s->snap_cv, &s->mu, &due) == 0)
             ;
         pthread_mutex_unlock(&s->mu);

@@ -245,6 +245,19 @@ def drive(b, url, shots):
     if shots is not None:
         b.screenshot(os.path.join(shots, "live-seed.png"))
 
+    # 4: the 3D cutaway and the ultrasound side by side ({"views": ...}); frames keep coming
+    b.key("keyDown", "4", "Digit4", 52, text="4")
+    b.key("keyUp", "4", "Digit4", 52)
+    check(b.js('document.querySelectorAll("button.view")[3].style.fontWeight') == "bold",
+          "key 4 chooses the view on the page")
+    n0 = len(srcs)
+    h = wait_hud(b, lambda h: frames(h) and len(srcs) >= n0 + 5 and "views" not in h["status"],
+                 "frames in the chosen view")
+    check(True, "key 4: %d more frames, no error from the server" % (len(srcs) - n0))
+    if shots is not None:
+        time.sleep(0.5)
+        b.screenshot(os.path.join(shots, "live-views.png"))
+
     # End, clicked with the mouse
     r = b.js("""(() => { const e = document.getElementById("end"); e.scrollIntoView();
                const r = e.getBoundingClientRect();

@@ -92,6 +92,7 @@ HOSTILE = [
     "{\"insert_speed\": 0.9}", "{\"base_velocity\": [0, 0]}", "{\"twist\": NaN}",
     "{\"unknown\": true}", "{\"pause\": 1}", "{\"end\": true} trailing", "{\"a\":" * 500,
     "\x00\x01\x02", "{\"insert_speed\": 0.01, \"insert_speed\": 0.02}", "x" * 5000,
+    "{\"views\": \"echo\"}", "{\"views\": \"side,top,axis,trus\"}",
 ]
 
 
@@ -130,6 +131,14 @@ async def session(url):
         await c.pump(lambda c: c.state["seeds"] >= 1)
         await ws.send(json.dumps({"pause": True}))
         await c.pump(lambda c: c.state["paused"])
+        # the view changes the frames, not the physics: drawn again while paused
+        await asyncio.sleep(0.3)
+        await c.pump(lambda c: True)
+        f0, t0, e0 = c.frames, c.state["t_s"], len(c.errors)
+        await ws.send(json.dumps({"views": "cutaway3d,trus"}))
+        await c.pump(lambda c: c.frames >= f0 + 1)
+        check(c.state["t_s"] == t0 and len(c.errors) == e0, "a new view drawn while paused")
+        await ws.send(json.dumps({"views": ""}))  # the scenario's own again
         await ws.send(json.dumps({"pause": False}))
         await c.pump(lambda c: not c.state["paused"])
         t_left = c.state["t_s"]

@@ -1,5 +1,6 @@
 /* The live session's message parser (engine/live_protocol.c) on good and hostile input. */
 #include "live_protocol.h"
+#include "scene.h"
 #include "ns_limits.h"
 #include "ns_test.h"
 
@@ -26,6 +27,10 @@ static int good_messages(void)
     ENSURE(parse("{\"end\": true}", &m) == 0 && m.end);
     ENSURE(parse("{\"insert_speed\": 0, \"twist_rate\": 1}", &m) == 0);
     ENSURE(m.has == (NS_LIVE_INSERT_SPEED | NS_LIVE_TWIST_RATE));
+    ENSURE(parse("{\"views\": \"cutaway3d,trus\"}", &m) == 0 && m.has == NS_LIVE_VIEWS);
+    ENSURE(m.nviews == 2 && m.views[0] == NS_VIEW_CUTAWAY3D && m.views[1] == NS_VIEW_TRUS);
+    ENSURE(parse("{\"views\": \"side\", \"pause\": true}", &m) == 0 && m.nviews == 1);
+    ENSURE(parse("{\"views\": \"\"}", &m) == 0 && m.has == NS_LIVE_VIEWS && m.nviews == 0);
     /* an escaped key is the same key */
     ENSURE(parse("{\"insert\\u005fspeed\": 0.002}", &m) == 0 && m.insert_speed == 0.002);
     return 0;
@@ -79,6 +84,13 @@ static int hostile_messages(void)
         "{\"insert_speed\": 0.01, \"pause\": true, \"end\": true, \"bogus\": 1}",
         "{\"aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\": 1}",
         "{\"insert_speed\": 0.000000000000000000000000000000000000000000000000000000000000001}",
+        "{\"views\": \",\"}",
+        "{\"views\": \"echo\"}",
+        "{\"views\": \"side,top,axis,trus\"}",
+        "{\"views\": [\"side\"]}",
+        "{\"views\": 3}",
+        "{\"views\": \"side,side,side,side,side,side,side,side,side,side,side,side,side\"}",
+        "{\"views\": \"side\\u0000top\"}",
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         NsLiveMsg m;
