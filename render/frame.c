@@ -18,18 +18,12 @@ static double now_ms(void)
     return 1e3 * (double)ts.tv_sec + 1e-6 * (double)ts.tv_nsec;
 }
 
-int ns_frame_open(NsFrame *f, int w, int h, char *err, int err_sz)
-{
-    return ns_frame_open_samples(f, w, h, 4, err, err_sz);
-}
-
 int ns_frame_open_samples(NsFrame *f, int w, int h, int samples, char *err, int err_sz)
 {
     memset(f, 0, sizeof *f);
     f->w = w;
     f->h = h;
     int px = h / 34 < 11 ? 11 : h / 34;
-    f->samples = samples;
     f->scratch = samples <= 1 ? malloc((size_t)w * h * 3) : NULL;
     if (samples <= 1 && !f->scratch) {
         snprintf(err, (size_t)err_sz, "out of memory for %dx%d frames", w, h);

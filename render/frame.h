@@ -19,14 +19,12 @@ typedef struct NsFrame {
     /* the last frame's stages [ms]: building the views' vertex lists; OpenGL (drawing is
      * deferred by llvmpipe to the read-back, so both are here); the HUD text */
     double build_ms, gl_ms, text_ms;
-    int samples;      /* OpenGL's samples a pixel; with 1 the edges are smoothed after */
-    uint8_t *scratch; /* w * h * 3 bytes for the smoothing */
+    uint8_t *scratch; /* w * h * 3 bytes for the edge smoothing (one sample a pixel only) */
 } NsFrame;
 
-/* A renderer of w x h frames with 4x multisampling and the HUD fonts. */
-int ns_frame_open(NsFrame *f, int w, int h, char *err, int err_sz);
-/* The same with `samples` samples a pixel (1: none; the OpenGL views' stair steps are then
- * softened on the CPU, ns_image_smooth_edges). */
+/* A renderer of w x h frames with `samples` samples a pixel and the HUD fonts (1: no
+ * multisampling; the OpenGL views' stair steps are then softened on the CPU,
+ * ns_image_smooth_edges). */
 int ns_frame_open_samples(NsFrame *f, int w, int h, int samples, char *err, int err_sz);
 void ns_frame_close(NsFrame *f);
 
