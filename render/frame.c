@@ -118,16 +118,25 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
         if (ns_renderer_draw(f->gl, &f->scene, x, 0, w, f->h, err, err_sz))
             return -1;
     }
+    /* The views drawn on the CPU (their own columns) while OpenGL rasterizes the others: once
+     * the image has the frame's size, before the read-back waits for OpenGL. */
+    bool sized = out->w == f->w && out->h == f->h && out->rgb;
+    if (gw > 0 && sized)
+        ns_renderer_flush(f->gl);
+    if (!sized && gw <= 0) {
+        ns_image_free(out);
+        if (ns_image_alloc(out, f->w, f->h, err, err_sz))
+            return -1;
+        sized = true;
+    }
+    for (int k = 0; sized && k < nviews; k++)
+        if (views[k] == NS_VIEW_TRUS)
+            ns_trus_draw(in, out, k * vw, k == nviews - 1 ? f->w - k * vw : vw, f->h);
     if (gw > 0 && ns_renderer_read(f->gl, out, gx, gw, err, err_sz))
         return -1;
     if (gw > 0 && f->scratch)
         ns_image_smooth_edges(out, gx, gw, f->scratch);
-    if (gw <= 0 && (out->w != f->w || out->h != f->h || !out->rgb)) {
-        ns_image_free(out);
-        if (ns_image_alloc(out, f->w, f->h, err, err_sz))
-            return -1;
-    }
-    for (int k = 0; k < nviews; k++)
+    for (int k = 0; !sized && k < nviews; k++) /* the first frame: the image is made above */
         if (views[k] == NS_VIEW_TRUS)
             ns_trus_draw(in, out, k * vw, k == nviews - 1 ? f->w - k * vw : vw, f->h);
     double t1 = now_ms();

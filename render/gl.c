@@ -396,6 +396,12 @@ int ns_renderer_draw(NsRenderer *r, const NsScene *s, int x, int y, int w, int h
     return 0;
 }
 
+void ns_renderer_flush(NsRenderer *r)
+{
+    glFlush();
+    (void)r;
+}
+
 int ns_renderer_read(NsRenderer *r, NsImage *im, int x, int w, char *err, int err_sz)
 {
     glDisable(GL_SCISSOR_TEST);

@@ -25,6 +25,9 @@ void ns_renderer_clear(NsRenderer *r, const uint8_t bg[3], int x, int w);
  * error (err says which). */
 int ns_renderer_draw(NsRenderer *r, const NsScene *s, int x, int y, int w, int h, char *err,
                      int err_sz);
+/* Starts the drawing queued so far (glFlush): with a software rasterizer the frame is drawn on
+ * its threads while the caller goes on, until ns_renderer_read waits for it. */
+void ns_renderer_flush(NsRenderer *r);
 /* Resolves the samples of columns [x, x + w) and reads them into im (allocated to the frame's
  * size; where it had to be, its other columns are black). */
 int ns_renderer_read(NsRenderer *r, NsImage *im, int x, int w, char *err, int err_sz);
