@@ -207,6 +207,26 @@ rc=$?
     pass "accuracy: a bound no measured setting meets is refused" ||
     fail "accuracy: refusal" "exit $rc: $(tail -1 "$TMP/acc_refused.err")"
 
+# ---- brachytherapy: its live field takes dt 40 ms from the front; the session replays ----
+OUT5="$TMP/brachy"
+if bench_live "$TMP/brachy.json" "$TMP/brachy.err" "$SRC/scenarios/brachytherapy.lua" \
+    --seconds 4 --json --width 320 --height 180 -o "$OUT5" &&
+    "$BIN" run "$SRC/scenarios/brachytherapy.lua" --replay "$OUT5/controls.csv" \
+        -o "$TMP/replay5" --no-render --quiet 2>"$TMP/replay5.err" &&
+    "$PY" - "$OUT5/report.json" "$TMP/replay5/report.json" <<'PY'; then
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+m = a["live"]["model"]  # the scenario's live = {accuracy = 1.5e-3, front = "brachytherapy"}
+assert m["chosen_by"] == "accuracy" and m["front"] == "brachytherapy" and m["dt_s"] == 0.04, m
+assert 0 < m["measured_tip_error_m"] <= 1.5e-3, m
+assert a["steps"] > 0 and a["steps"] == b["steps"] and b["dt_s"] == 0.04, (a["steps"], b["steps"])
+assert a["state_hash"] == b["state_hash"] and a["score"]["total"] == b["score"]["total"]
+PY
+    pass "brachytherapy: the live field's model (dt 40 ms); the replay's state hash and score"
+else
+    fail "brachytherapy session and replay" "$(tail -2 "$TMP/brachy.err" "$TMP/replay5.err" 2>&1)"
+fi
+
 # ---- the scenario's live = {accuracy, front}: refused at load when it cannot be met ----
 n=0
 for v in 'front = "brachytherapy"' 'accuracy = -1' 'accuracy = 1e-9, front = "brachytherapy"' \
