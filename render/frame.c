@@ -118,8 +118,9 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
         if (ns_renderer_draw(f->gl, &f->scene, x, 0, w, f->h, err, err_sz))
             return -1;
     }
-    /* The views drawn on the CPU (their own columns) while OpenGL rasterizes the others: once
-     * the image has the frame's size, before the read-back waits for OpenGL. */
+    /* The views drawn on the CPU outside OpenGL's columns, while OpenGL rasterizes (once the
+     * image has the frame's size: before the read-back waits for OpenGL); those between
+     * OpenGL's views (read back as background), and all of them in a first frame, after it. */
     bool sized = out->w == f->w && out->h == f->h && out->rgb;
     if (gw > 0 && sized)
         ns_renderer_flush(f->gl);
@@ -130,14 +131,14 @@ int ns_frame_render(NsFrame *f, NsSceneInput *in, const int *views, int nviews,
         sized = true;
     }
     for (int k = 0; sized && k < nviews; k++)
-        if (views[k] == NS_VIEW_TRUS)
+        if (views[k] == NS_VIEW_TRUS && (k < g0 || k >= g1))
             ns_trus_draw(in, out, k * vw, k == nviews - 1 ? f->w - k * vw : vw, f->h);
     if (gw > 0 && ns_renderer_read(f->gl, out, gx, gw, err, err_sz))
         return -1;
     if (gw > 0 && f->scratch)
         ns_image_smooth_edges(out, gx, gw, f->scratch);
-    for (int k = 0; !sized && k < nviews; k++) /* the first frame: the image is made above */
-        if (views[k] == NS_VIEW_TRUS)
+    for (int k = 0; k < nviews; k++)
+        if (views[k] == NS_VIEW_TRUS && (!sized || (k >= g0 && k < g1)))
             ns_trus_draw(in, out, k * vw, k == nviews - 1 ? f->w - k * vw : vw, f->h);
     double t1 = now_ms();
     f->build_ms = build;

@@ -326,6 +326,38 @@ static int trus_tip_where_simulated(void)
     return 0;
 }
 
+/* A CPU view between OpenGL views (side, trus, side) keeps its column: the frame's middle third
+ * is the trus view drawn alone at that size (above the views' names), in a first frame and in
+ * the next (drawn while OpenGL rasterizes, into the image already sized). */
+static int trus_between_gl_views(void)
+{
+    Block b, b1;
+    NsFrame f, f1;
+    int vw = 200, h = 240;
+    ENSURE(open_block_samples(&b, &f, 3 * vw, h, 1) == 0);
+    ENSURE(open_block_samples(&b1, &f1, vw, h, 1) == 0);
+    char err[256];
+    int views[3] = {NS_VIEW_SIDE, NS_VIEW_TRUS, NS_VIEW_SIDE}, one[1] = {NS_VIEW_TRUS};
+    NsImage alone = {0}, im = {0};
+    ENSURE(ns_frame_render(&f1, &b1.in, one, 1, NULL, 0, false, &alone, err, sizeof err) == 0);
+    for (int pass = 0; pass < 2; pass++) {
+        ENSURE(ns_frame_render(&f, &b.in, views, 3, NULL, 0, false, &im, err, sizeof err) == 0);
+        int differ = 0;
+        for (int y = 0; y < h * 3 / 4; y++)
+            differ += memcmp(im.rgb + 3 * ((size_t)y * 3 * vw + vw), alone.rgb + 3 * (size_t)y * vw,
+                             3 * (size_t)vw) != 0;
+        printf("  pass %d: %d rows of the middle third differ from trus alone\n", pass, differ);
+        ENSURE(differ == 0);
+    }
+    ns_image_free(&im);
+    ns_image_free(&alone);
+    ns_frame_close(&f);
+    ns_frame_close(&f1);
+    ns_mesh_free(&b.mesh);
+    ns_mesh_free(&b1.mesh);
+    return 0;
+}
+
 static int pixels_show_the_scene(void)
 {
     Block b;
@@ -427,5 +459,6 @@ NS_TEST_MAIN({"scene_cut_in_plane", scene_cut_in_plane},
              {"tip_where_simulated", tip_where_simulated},
              {"trus_tip_where_simulated", trus_tip_where_simulated},
              {"smooth_edges_blend_across", smooth_edges_blend_across},
+             {"trus_between_gl_views", trus_between_gl_views},
              {"isodose_lines_on_their_level", isodose_lines_on_their_level},
              {"pixels_show_the_scene", pixels_show_the_scene})
