@@ -75,6 +75,8 @@ typedef struct NsRunSteer {
     bool *avoided; /* (obstacle_count): named in an avoid list */
     double *way;   /* (way_n x 3) the kept RRT path's waypoints [m] */
     int way_n;
+    double *plan; /* (plan_n x 3) the last replan's predicted arc, every mm [m] (frames draw it) */
+    int plan_n;
 } NsRunSteer;
 
 /* The debrief (engine/run_debrief.c, docs/rendering.md "The debrief"): what a trainee is told

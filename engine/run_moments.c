@@ -191,6 +191,10 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
         in.has_cut_normal = sp->camera.has_cut_normal;
         memcpy(in.cut_normal, sp->camera.cut_normal, sizeof in.cut_normal);
         in.tet_edges = sp->camera.tet_edges;
+        if (r->have_steer) { /* act.steer's predicted arc ahead of the tip */
+            in.plan_x = r->steer.plan;
+            in.plan_n = r->steer.plan_n;
+        }
         ns_run_dosimetry_isodose(r, &in); /* the 100 % and 150 % lines, with dosimetry */
     }
     char l0[160], l1[160], l2[160], l3[160];

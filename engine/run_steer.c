@@ -60,6 +60,7 @@ void ns_run_steer_free(NsRunSteer *s)
         ns_plan_obs_free(&s->obs);
     free(s->avoided);
     free(s->way);
+    free(s->plan);
     free(s->ms.v);
     memset(s, 0, sizeof *s);
 }
@@ -199,6 +200,24 @@ static double arc_clearance(lua_State *L, const SteerArgs *a, const NsSteerActio
     return c;
 }
 
+/* Keeps the chosen action's predicted arc, from the tip to its closest approach, for the
+ * frames (the planned path drawn ahead of the needle). */
+static void keep_plan(lua_State *L, NsRunSteer *s, const SteerArgs *a, const NsSteerAction *act)
+{
+    NsPlanPath arc;
+    NsPlanAction pa = {act->twist, fmax(act->at, 1e-4), act->duty, act->rate};
+    double *xyz = NULL;
+    int np = -1;
+    if (ns_plan_path_init(&arc, &a->pose, a->kappa) && ns_plan_path_push(&arc, &pa))
+        np = ns_plan_path_points(&arc, STEER_PATH_STEP, &xyz);
+    ns_plan_path_free(&arc);
+    if (np < 0)
+        luaL_error(L, "needlesim: out of memory");
+    free(s->plan);
+    s->plan = xyz;
+    s->plan_n = np;
+}
+
 /* The helix choice towards the target, else the farthest kept waypoint at least STEER_WAY_AHEAD
  * ahead of the tip, that it reaches within STEER_WAY_MISS with its predicted arc keeping the
  * clearance. */
@@ -290,6 +309,7 @@ static int l_choose(lua_State *L)
             fallback = !toward_waypoint(L, s, &a, &act);
     }
     double ms = 1e3 * (ns_wall_s() - t0);
+    keep_plan(L, s, &a, &act); /* after the clock: drawing is not planning */
     if (ns_series_push(&s->ms, ms) != 0)
         luaL_error(L, "needlesim: out of memory");
     s->replans++;
@@ -305,6 +325,16 @@ static int l_choose(lua_State *L)
     lua_pushboolean(L, fallback);
     lua_setfield(L, -2, "fallback");
     return 1;
+}
+
+/* planner.finish(): act.steer has ended; its predicted arc is no longer drawn. */
+static int l_finish(lua_State *L)
+{
+    NsRunSteer *s = &self(L)->steer;
+    free(s->plan);
+    s->plan = NULL;
+    s->plan_n = 0;
+    return 0;
 }
 
 /* planner.track(args{tip, avoid, target_index}) -> distance [m] from the tip to the nearest
@@ -411,8 +441,11 @@ static int l_plan(lua_State *L)
 
 void ns_run_steer_push(lua_State *L, NsRun *r)
 {
-    static const luaL_Reg fns[] = {
-        {"choose", l_choose}, {"track", l_track}, {"plan", l_plan}, {NULL, NULL}};
+    static const luaL_Reg fns[] = {{"choose", l_choose},
+                                   {"track", l_track},
+                                   {"plan", l_plan},
+                                   {"finish", l_finish},
+                                   {NULL, NULL}};
     lua_createtable(L, 0, 6);
     lua_pushlightuserdata(L, r);
     luaL_setfuncs(L, fns, 1);

@@ -21,6 +21,7 @@ const uint8_t ns_scene_needle_rgb[5][3] = {
 };
 const uint8_t ns_scene_hit_rgb[3] = {40, 200, 70}, ns_scene_miss_rgb[3] = {225, 35, 45};
 const uint8_t ns_scene_iso_rgb[2][3] = {{255, 230, 40}, {255, 110, 20}};
+const uint8_t ns_scene_plan_rgb[3] = {140, 225, 250};
 
 void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3])
 {
@@ -522,6 +523,25 @@ static int build_solids(const NsSceneInput *in, NsScene *s)
     return 0;
 }
 
+/* The planned path: a tube a third of the needle's width (at least 1.5 pixels), light blue
+ * like the paper's predicted helices (§5). */
+static int build_plan(const NsSceneInput *in, NsScene *s)
+{
+    int n = in->plan_n;
+    if (!in->plan_x || n < 2)
+        return 0;
+    uint8_t(*rgb)[3] = malloc((size_t)n * sizeof *rgb);
+    if (!rgb)
+        return -1;
+    for (int k = 0; k < n; k++)
+        memcpy(rgb[k], ns_scene_plan_rgb, 3);
+    double px = in->px_size > 0.0 ? in->px_size : 0.0;
+    int rc = tube(&s->solid, in->plan_x, n, fmax(0.35 * in->rod_radius, 1.5 * px),
+                  (const uint8_t(*)[3])rgb, NULL);
+    free(rgb);
+    return rc;
+}
+
 /* ---- isodose lines on the cut face ---- */
 
 #define ISO_CELLS 120 /* grid cells across the larger side of the framed box */
@@ -634,7 +654,8 @@ int ns_scene_build(const NsSceneInput *in, NsView v, double aspect, NsScene *s)
             nc[i] = -nc[i];
     memcpy(s->plane, nc, sizeof nc);
     s->plane[3] = -dot(nc, p0);
-    if (build_cut(in, s) || build_isodose(in, s) || build_glass(in, v, s) || build_solids(in, s))
+    if (build_cut(in, s) || build_isodose(in, s) || build_glass(in, v, s) || build_solids(in, s) ||
+        build_plan(in, s))
         return -1;
     return 0;
 }

@@ -44,6 +44,7 @@ typedef struct NsScene {
 extern const uint8_t ns_scene_needle_rgb[5][3]; /* free, sticking, sliding back, sliding, cutting */
 extern const uint8_t ns_scene_hit_rgb[3], ns_scene_miss_rgb[3];
 extern const uint8_t ns_scene_iso_rgb[2][3]; /* the isodose levels' colours, in order */
+extern const uint8_t ns_scene_plan_rgb[3];   /* the planned path: light blue */
 /* The colour of tissue region k on the cut face. */
 void ns_scene_region_rgb(int region, bool obstacle, uint8_t rgb[3]);
 
@@ -103,6 +104,10 @@ typedef struct NsSceneInput {
     void *dose_ctx;
     double iso_levels[2];
     int iso_count;
+    /* the path a planner predicts ahead of the tip (act.steer's latest replan, paper §5):
+     * (plan_n x 3) points [m], drawn as a thin tube in ns_scene_plan_rgb. NULL: none. */
+    const double *plan_x;
+    int plan_n;
     double px_size; /* the world size of one pixel at the scene's centre, for minimum sizes */
 } NsSceneInput;
 

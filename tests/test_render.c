@@ -326,6 +326,48 @@ static int trus_tip_where_simulated(void)
     return 0;
 }
 
+static bool plan_blue(const uint8_t *c)
+{
+    return c && c[1] > c[0] + 30 && c[2] > c[0] + 40 && 10 * c[1] > 7 * c[2];
+}
+
+/* The planned path (act.steer's predicted arc) is drawn light blue where it lies, ahead of the
+ * tip, and only when given: the pixel of its midpoint in the side view and in cutaway3d, and
+ * not the mirror image of that point about the needle's axis. */
+static int plan_drawn_where_it_lies(void)
+{
+    Block b;
+    NsFrame f;
+    int w = 640, h = 360;
+    ENSURE(open_block_samples(&b, &f, w, h, 1) == 0);
+    double plan[9 * 3];
+    for (int k = 0; k < 9; k++) { /* from the tip (25 mm) 5 mm on, 3 mm aside in y and z */
+        double s = k / 8.0;
+        plan[3 * k] = 0.025 + 0.005 * s;
+        plan[3 * k + 1] = plan[3 * k + 2] = -0.003 * s * s;
+    }
+    const double mid[3] = {0.0275, -0.00075, -0.00075}, mirror[3] = {0.0275, 0.00075, 0.00075};
+    const NsView views[2] = {NS_VIEW_SIDE, NS_VIEW_CUTAWAY3D};
+    NsImage im = {0};
+    for (int v = 0; v < 2; v++)
+        for (int with = 0; with < 2; with++) {
+            b.in.plan_x = with ? plan : NULL;
+            b.in.plan_n = with ? 9 : 0;
+            ENSURE(render_view(&b, &f, &im, false, views[v]) == 0);
+            NsCamera cam;
+            ns_scene_camera(&b.in, views[v], (double)w / h, &cam);
+            const uint8_t *c = pixel(&im, &cam, w, h, 0, mid),
+                          *m = pixel(&im, &cam, w, h, 0, mirror);
+            printf("  %s, %s the plan: (%d, %d, %d) at its midpoint\n", ns_view_name(views[v]),
+                   with ? "with" : "without", c ? c[0] : -1, c ? c[1] : -1, c ? c[2] : -1);
+            ENSURE(plan_blue(c) == (with == 1) && !plan_blue(m));
+        }
+    ns_image_free(&im);
+    ns_frame_close(&f);
+    ns_mesh_free(&b.mesh);
+    return 0;
+}
+
 /* A CPU view between OpenGL views (side, trus, side) keeps its column: the frame's middle third
  * is the trus view drawn alone at that size (above the views' names), in a first frame and in
  * the next (drawn while OpenGL rasterizes, into the image already sized). */
@@ -460,5 +502,6 @@ NS_TEST_MAIN({"scene_cut_in_plane", scene_cut_in_plane},
              {"trus_tip_where_simulated", trus_tip_where_simulated},
              {"smooth_edges_blend_across", smooth_edges_blend_across},
              {"trus_between_gl_views", trus_between_gl_views},
+             {"plan_drawn_where_it_lies", plan_drawn_where_it_lies},
              {"isodose_lines_on_their_level", isodose_lines_on_their_level},
              {"pixels_show_the_scene", pixels_show_the_scene})

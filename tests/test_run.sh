@@ -916,39 +916,14 @@ sed 's/^    name = "tutorial",/    name = "tutorial", camera = { views = { "side
 "$BIN" run "$TMP/views.lua" -o "$TMP/rv" --frames --width 480 --height 160 --steps 40 \
     --frame-every 40 --layout side,cutaway3d,axis --samples 4 --quiet >/dev/null 2>"$TMP/err_rv"
 rc=$?
-if [ $rc = 0 ] && python3 - "$TMP/rv" <<'PY' >"$TMP/py_rv" 2>&1; then
-import json, struct, sys, zlib
+if [ $rc = 0 ] && python3 - "$TMP/rv" "$SRC/tests" <<'PY' >"$TMP/py_rv" 2>&1; then
+import json, sys
+sys.path.insert(0, sys.argv[2])
+import png_rgb
 d = sys.argv[1]
 r = json.load(open(d + "/report.json"))
 assert r["render"]["frames"] == 2 and r["render"]["fps"] == 10, r["render"]
-# decode the last frame (8-bit RGB, non-interlaced, as render/image.c writes it)
-data = open(d + "/frames/000001.png", "rb").read()
-pos, idat, w, h = 8, b"", 0, 0
-while pos < len(data):
-    n, kind = struct.unpack(">I4s", data[pos:pos + 8])
-    body = data[pos + 8:pos + 8 + n]
-    if kind == b"IHDR":
-        w, h, depth, ctype, _, _, lace = struct.unpack(">IIBBBBB", body)
-        assert depth == 8 and ctype == 2 and lace == 0
-    elif kind == b"IDAT":
-        idat += body
-    pos += 12 + n
-raw, rows, prev = zlib.decompress(idat), [], bytearray(3 * w)
-for y in range(h):
-    f, line = raw[y * (3 * w + 1)], bytearray(raw[y * (3 * w + 1) + 1:(y + 1) * (3 * w + 1)])
-    for i in range(3 * w):
-        a = line[i - 3] if i >= 3 else 0
-        b = prev[i]
-        c = prev[i - 3] if i >= 3 else 0
-        if f == 1: line[i] = (line[i] + a) & 255
-        elif f == 2: line[i] = (line[i] + b) & 255
-        elif f == 3: line[i] = (line[i] + (a + b) // 2) & 255
-        elif f == 4:
-            p = a + b - c
-            pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-            line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
-    rows.append(line)
-    prev = line
+w, h, rows = png_rgb.read(d + "/frames/000001.png")  # the last frame
 assert (w, h) == (480, 160), (w, h)
 gel = (228, 178, 164)  # region 0's cut-face colour (render/scene.c)
 counts = [0, 0, 0]

@@ -57,6 +57,28 @@ else
     fail "report.json steering keys" "missing or wrong"
 fi
 
+# act.steer's predicted arc in the frames (docs/planning.md, "In the frames"): light blue in the
+# frame at step 150, mid-steering, and none in the first frame, before any replan
+"$BIN" run "$TMP/steer.lua" --quiet --steps 150 --frames --frame-every 150 --width 480 \
+    --height 270 -o "$TMP/steer_f" >"$OUT" 2>"$ERR"
+if [ $? = 0 ] && python3 - "$TMP/steer_f/frames" "$ROOT/tests" <<'PY' >"$TMP/py_f" 2>&1; then
+import sys
+sys.path.insert(0, sys.argv[2])
+import png_rgb
+def light_blue(path):  # ns_scene_plan_rgb (140, 225, 250), lit: not the needle's blue
+    w, h, rows = png_rgb.read(path)
+    return sum(1 for row in rows for x in range(w)
+               if row[3 * x + 2] > 180 and row[3 * x + 1] > 150 and
+               row[3 * x + 1] > row[3 * x] + 40 and row[3 * x + 2] > row[3 * x] + 60)
+first, last = light_blue(sys.argv[1] + "/000000.png"), light_blue(sys.argv[1] + "/000001.png")
+print("light-blue pixels: %d before, %d while steering" % (first, last))
+assert first == 0 and last >= 20, (first, last)
+PY
+    pass "the planned arc drawn while steering ($(tail -1 "$TMP/py_f"))"
+else
+    fail "the planned arc in the frames" "$(tail -1 "$TMP/py_f")"
+fi
+
 # ns.plan from a script: a plan that reaches the goal with the rods' clearance
 scenario plan 'local p = ns.plan { target = "goal", avoid = { "near rod", "far rod" }, clearance = 2e-3 }; assert(p.ok and #p.actions >= 1 and #p.path > 50 and p.error_mm < 1 and p.clearance_mm >= 2, "ns.plan: a bad plan")'
 "$BIN" run "$TMP/plan.lua" --no-render --quiet --steps 2 -o "$TMP/plan" >"$OUT" 2>"$ERR" &&

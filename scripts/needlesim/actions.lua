@@ -627,6 +627,7 @@ function act.steer(t)
             (turned + P.kappa * prior) / (held + prior)))
     end
     stop()
+    P.finish() -- its predicted arc is no longer drawn in the frames
     local q, p = sim.targets[f.target], sim.tip
     return math.sqrt((q[1] - p[1]) ^ 2 + (q[2] - p[2]) ^ 2 + (q[3] - p[3]) ^ 2)
 end
