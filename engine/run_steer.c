@@ -201,8 +201,9 @@ static double arc_clearance(lua_State *L, const SteerArgs *a, const NsSteerActio
 }
 
 /* Keeps the chosen action's predicted arc, from the tip to its closest approach, for the
- * frames (the planned path drawn ahead of the needle). */
-static void keep_plan(lua_State *L, NsRunSteer *s, const SteerArgs *a, const NsSteerAction *act)
+ * frames (the planned path drawn ahead of the needle). A picture only: out of memory, none is
+ * kept and the run goes on. */
+static void keep_plan(NsRunSteer *s, const SteerArgs *a, const NsSteerAction *act)
 {
     NsPlanPath arc;
     NsPlanAction pa = {act->twist, fmax(act->at, 1e-4), act->duty, act->rate};
@@ -211,11 +212,11 @@ static void keep_plan(lua_State *L, NsRunSteer *s, const SteerArgs *a, const NsS
     if (ns_plan_path_init(&arc, &a->pose, a->kappa) && ns_plan_path_push(&arc, &pa))
         np = ns_plan_path_points(&arc, STEER_PATH_STEP, &xyz);
     ns_plan_path_free(&arc);
-    if (np < 0)
-        luaL_error(L, "needlesim: out of memory");
     free(s->plan);
-    s->plan = xyz;
-    s->plan_n = np;
+    s->plan = np > 0 ? xyz : NULL;
+    s->plan_n = np > 0 ? np : 0;
+    if (np <= 0)
+        free(xyz);
 }
 
 /* The helix choice towards the target, else the farthest kept waypoint at least STEER_WAY_AHEAD
@@ -309,7 +310,7 @@ static int l_choose(lua_State *L)
             fallback = !toward_waypoint(L, s, &a, &act);
     }
     double ms = 1e3 * (ns_wall_s() - t0);
-    keep_plan(L, s, &a, &act); /* after the clock: drawing is not planning */
+    keep_plan(s, &a, &act); /* after the clock: drawing is not planning */
     if (ns_series_push(&s->ms, ms) != 0)
         luaL_error(L, "needlesim: out of memory");
     s->replans++;

@@ -916,7 +916,7 @@ sed 's/^    name = "tutorial",/    name = "tutorial", camera = { views = { "side
 "$BIN" run "$TMP/views.lua" -o "$TMP/rv" --frames --width 480 --height 160 --steps 40 \
     --frame-every 40 --layout side,cutaway3d,axis --samples 4 --quiet >/dev/null 2>"$TMP/err_rv"
 rc=$?
-if [ $rc = 0 ] && python3 - "$TMP/rv" "$SRC/tests" <<'PY' >"$TMP/py_rv" 2>&1; then
+if [ $rc = 0 ] && python3 -B - "$TMP/rv" "$SRC/tests" <<'PY' >"$TMP/py_rv" 2>&1; then
 import json, sys
 sys.path.insert(0, sys.argv[2])
 import png_rgb

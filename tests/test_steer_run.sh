@@ -61,7 +61,7 @@ fi
 # frame at step 150, mid-steering, and none in the first frame, before any replan
 "$BIN" run "$TMP/steer.lua" --quiet --steps 150 --frames --frame-every 150 --width 480 \
     --height 270 -o "$TMP/steer_f" >"$OUT" 2>"$ERR"
-if [ $? = 0 ] && python3 - "$TMP/steer_f/frames" "$ROOT/tests" <<'PY' >"$TMP/py_f" 2>&1; then
+if [ $? = 0 ] && python3 -B - "$TMP/steer_f/frames" "$ROOT/tests" <<'PY' >"$TMP/py_f" 2>&1; then
 import sys
 sys.path.insert(0, sys.argv[2])
 import png_rgb
@@ -69,7 +69,8 @@ def light_blue(path):  # ns_scene_plan_rgb (140, 225, 250), lit: not the needle'
     w, h, rows = png_rgb.read(path)
     return sum(1 for row in rows for x in range(w)
                if row[3 * x + 2] > 180 and row[3 * x + 1] > 150 and
-               row[3 * x + 1] > row[3 * x] + 40 and row[3 * x + 2] > row[3 * x] + 60)
+               row[3 * x + 1] > row[3 * x] + 40 and row[3 * x + 2] > row[3 * x] + 60 and
+               10 * row[3 * x + 1] > 7 * row[3 * x + 2])  # green near blue: not the needle
 first, last = light_blue(sys.argv[1] + "/000000.png"), light_blue(sys.argv[1] + "/000001.png")
 print("light-blue pixels: %d before, %d while steering" % (first, last))
 assert first == 0 and last >= 20, (first, last)
