@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/random.h>
+#include <time.h>
 
 #include "err.h"
 #include "live_protocol.h"
@@ -35,6 +36,9 @@ int pthread_attr_setstacksize(pthread_attr_t *attr, size_t size)
     return real(attr, size < NS_MIN_THREAD_STACK ? NS_MIN_THREAD_STACK : size);
 }
 
+/* How long the server waits, at the session's end, for the clients to be sent the end [s]. */
+#define NS_LIVE_DRAIN_S 3.0
+
 extern const char ns_live_page[];
 extern const size_t ns_live_page_size;
 
@@ -45,6 +49,7 @@ typedef struct Client {
     bool sender_started;
     atomic_bool closing;
     atomic_bool controller;
+    atomic_bool done; /* the sender has returned (after the end, when the session is over) */
 } Client;
 
 struct NsLiveServer {
@@ -253,6 +258,7 @@ static void *sender_main(void *arg)
     }
     free(jpeg.p);
     free(json.p);
+    atomic_store(&c->done, true);
     return NULL;
 }
 
@@ -425,10 +431,27 @@ void ns_live_server_url(const NsLiveServer *srv, char *out, size_t out_sz)
              srv->need_token ? srv->token : "");
 }
 
+/* True once every client's sender has returned: after the session is over, each has sent the
+ * last frame, {"ended": true} and its close (or found its client gone). */
+static bool senders_done(NsLiveServer *srv)
+{
+    pthread_mutex_lock(&srv->mu);
+    bool done = true;
+    for (int i = 0; i < srv->nclients; i++)
+        done = done && (!srv->clients[i]->sender_started || atomic_load(&srv->clients[i]->done));
+    pthread_mutex_unlock(&srv->mu);
+    return done;
+}
+
 void ns_live_server_stop(NsLiveServer *srv)
 {
     if (!srv)
         return;
+    /* mg_stop closes the sockets at once: the senders first finish writing the end, for
+     * NS_LIVE_DRAIN_S at most (a client that reads nothing cannot hold the exit up). */
+    double until = ns_wall_s() + NS_LIVE_DRAIN_S;
+    while (!senders_done(srv) && ns_wall_s() < until)
+        nanosleep(&(struct timespec){.tv_nsec = 10 * 1000 * 1000}, NULL);
     mg_stop(srv->ctx); /* closes the connections: ws_close joins each sender */
     mg_exit_library();
     pthread_mutex_destroy(&srv->mu);
