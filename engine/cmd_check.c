@@ -1,4 +1,4 @@
-/* needlesim check SCENARIO.lua [--json] [--mesh-out FILE.vtu|FILE.msh]
+/* needlesim check SCENARIO.lua [--json] [--mesh-out FILE.vtu|FILE.msh] [--set KEY=VALUE]...
  *
  * Runs the scenario, builds its tissue and prints mesh and model statistics: a table for
  * people, or with --json exactly one JSON object on stdout. --mesh-out writes the mesh
@@ -17,10 +17,12 @@
 #include "mesh_io.h"
 #include "ns_config.h"
 #include "quality.h"
+#include "run.h"
 #include "scenario.h"
 
 static const char check_usage[] =
-    "usage: needlesim check SCENARIO.lua [--json] [--mesh-out FILE.vtu|FILE.msh]\n";
+    "usage: needlesim check SCENARIO.lua [--json] [--mesh-out FILE.vtu|FILE.msh] "
+    "[--set KEY=VALUE]...\n";
 
 typedef enum MeshFormat { FORMAT_NONE, FORMAT_VTU, FORMAT_MSH } MeshFormat;
 
@@ -176,6 +178,7 @@ int ns_cmd_check(int argc, char **argv)
 {
     const char *scenario = NULL, *mesh_out = NULL;
     bool json = false, options_done = false;
+    NsRunOpts sets = {0}; /* --set KEY=VALUE, checked as run checks them */
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (options_done || a[0] != '-' || strcmp(a, "-") == 0) {
@@ -195,6 +198,12 @@ int ns_cmd_check(int argc, char **argv)
             mesh_out = argv[++i];
         } else if (strncmp(a, "--mesh-out=", 11) == 0) {
             mesh_out = a + 11;
+        } else if (strcmp(a, "--set") == 0) {
+            if (i + 1 >= argc)
+                return usage_error("%s needs a value", a);
+            const char *why = ns_run_opt_set(&sets, argv[++i]);
+            if (why)
+                return usage_error(why, argv[i]);
         } else {
             return usage_error("unknown option '%s'", a);
         }
@@ -220,7 +229,7 @@ int ns_cmd_check(int argc, char **argv)
 
     NsScenario sc;
     char err[2048];
-    if (ns_scenario_load(scenario, &sc, err, (int)sizeof err) != 0) {
+    if (ns_scenario_load_set(scenario, sets.sets, sets.nsets, &sc, err, (int)sizeof err) != 0) {
         ns_one_line(err);
         fprintf(stderr, "%s\n", err);
         return 1;

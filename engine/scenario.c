@@ -523,6 +523,8 @@ static void push_sets(lua_State *L, const char *const *sets, int nsets)
         lua_rawset(L, -3);
     }
     lua_setglobal(L, "__ns_sets");
+    lua_pushcfunction(L, scn_l_plan_implant);
+    lua_setglobal(L, "__ns_plan_implant");
     lua_newtable(L);
     lua_setglobal(L, "__ns_params");
 }

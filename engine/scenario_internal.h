@@ -75,4 +75,8 @@ NsShape *scn_shape_field(Builder *b, int idx, const char *key, const char *where
 /* engine/scenario_build.c: the scenario's tissue (box, shapes or file) from the table at si. */
 int scn_build_tissue(Builder *b, int si);
 
+/* __ns_plan_implant(args), the engine's half of ns.plan_implant (scenario_implant.c;
+ * docs/planning.md): registered as a global of the scenario's sandbox. */
+int scn_l_plan_implant(lua_State *L);
+
 #endif

@@ -33,7 +33,11 @@ local template = ns.template { origin = { -0.020, -0.0125, 0 }, spacing = 5e-3, 
   rows = 6 }
 
 -- The plan: the needles' holes, none within 9 mm of the urethra's axis (an entry may name a
--- `reaim` hole, tried when the needle meets the arch).
+-- `reaim` hole, tried when the needle meets the arch). With `--set planner=true` the needles and
+-- their loads come from ns.plan_implant instead (docs/planning.md, "Implant planning"): the
+-- fewest needles through the template that bring 95 % of the gland to the prescription, clear
+-- of the urethra, the rectum and the arch by 2 mm.
+local STRENGTH = ns.param("strength", 0.37)
 local plan = {
   { hole = "D1" }, { hole = "E1" }, { hole = "F1" },
   { hole = "B2" }, { hole = "D2" }, { hole = "E2" }, { hole = "F2" }, { hole = "H2" },
@@ -42,24 +46,34 @@ local plan = {
   { hole = "B5" }, { hole = "C5" }, { hole = "G5" }, { hole = "H5" },
   { hole = "D6" }, { hole = "F6" },
 }
--- Each needle's load: as many seeds 1 cm apart as the gland's length along the track holds
--- (seeds 2 mm inside its ends), the train centred in it; the needle's depth puts its first
--- seed at the deepest place.
 local targets, seeds, needles = {}, {}, {}
-for _, n in ipairs(plan) do
-  local p = template.hole(n.hole)
-  local q = 1 - (p[1] / RX) ^ 2 - (p[2] / RY) ^ 2
-  local half = RZ * math.sqrt(math.max(q, 0))
-  local count = math.max(1, math.floor((2 * half - 4e-3) / 1e-2) + 1)
-  local deepest = 0.050 + (count - 1) * 0.5e-2
-  local load = { seeds = count, spacing = 1e-2 }
-  local depth = deepest + template.offsets(load)[1]
-  for i, at in ipairs(template.seeds(n.hole, depth, load)) do
-    local name = string.format("%s seed %d", n.hole, i)
+local function add(hole, depth, load, reaim)
+  for i, at in ipairs(template.seeds(hole, depth, load)) do
+    local name = string.format("%s seed %d", hole, i)
     targets[#targets + 1] = { name = name, at = at, tolerance = 3e-3 }
     seeds[#seeds + 1] = { target = name }
   end
-  needles[#needles + 1] = { hole = n.hole, reaim = n.reaim, depth = depth, load = load }
+  needles[#needles + 1] = { hole = hole, reaim = reaim, depth = depth, load = load }
+end
+if ns.param("planner", false) then
+  local inverse = ns.plan_implant { tissue = pelvis.tissue, template = template,
+    region = "prostate", avoid = { "urethra", "rectum", "pubic_arch" }, strength = STRENGTH }
+  for _, n in ipairs(inverse.needles) do
+    add(n.hole, n.depth, n.load)
+  end
+else
+  -- Each needle's load: as many seeds 1 cm apart as the gland's length along the track holds
+  -- (seeds 2 mm inside its ends), the train centred in it; the needle's depth puts its first
+  -- seed at the deepest place.
+  for _, n in ipairs(plan) do
+    local p = template.hole(n.hole)
+    local q = 1 - (p[1] / RX) ^ 2 - (p[2] / RY) ^ 2
+    local half = RZ * math.sqrt(math.max(q, 0))
+    local count = math.max(1, math.floor((2 * half - 4e-3) / 1e-2) + 1)
+    local deepest = 0.050 + (count - 1) * 0.5e-2
+    local load = { seeds = count, spacing = 1e-2 }
+    add(n.hole, deepest + template.offsets(load)[1], load, n.reaim)
+  end
 end
 
 local first = template.entry(needles[1].hole)
@@ -70,7 +84,8 @@ local duration = count >= #needles and 150 or nil
 
 return ns.scenario {
   name = "prostate seed implant",
-  description = "22 preloaded needles, 71 seeds, their dose planned against delivered.",
+  description = string.format("%d preloaded needles, %d seeds, their dose planned against "
+    .. "delivered.", #needles, #seeds),
   dt = ns.param("dt", 0.01),
   duration = duration,
   needle = ns.needle { kind = "flexible", bevel_deg = 30 },
@@ -79,7 +94,7 @@ return ns.scenario {
   targets = targets,
   seeds = seeds,
   -- I-125 model 6711, 145 Gy to the prostate (the AAPM TG-137 / ABS monotherapy prescription).
-  dosimetry = { prescription = 145, strength = ns.param("strength", 0.37) },
+  dosimetry = { prescription = 145, strength = STRENGTH },
   obstacles = {
     { name = "urethra", region = "urethra" },
     { name = "rectum", region = "rectum" },

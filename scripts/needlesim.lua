@@ -1121,6 +1121,119 @@ function ns.template(t)
     return new(TEMPLATE, tpl)
 end
 
+--- ns.plan_implant{tissue, template, region, avoid, clearance, seeds, spacing, needles_max,
+---                  prescription, strength, coverage, v150_max, grid, margin}: the needles of a seed
+-- implant that bring `coverage` (default 0.95) of region `region` (a name in `tissue`, an
+-- ns.tissue.shapes) to the prescription with the fewest insertions (docs/planning.md,
+-- "Implant planning"): straight needles through the template's holes, each track's seeds
+-- `spacing` apart (default 1 cm) centred in the region's span of it (the end seeds `margin`,
+-- default 2 mm, inside), no track or seed within `clearance` (default 2 mm) of a region named in
+-- `avoid`, at most `seeds` seeds (default 200) and `needles_max` needles (default: every
+-- hole); TG-43 dose (I-125 model 6711, each seed `strength` U, default 0.5) on a `grid` of
+-- spacing 2 mm in the undeformed anatomy, `prescription` Gy (default 145); needles that keep
+-- V150 at most `v150_max` % (default 60) are preferred. Returns {needles =
+-- {{hole, depth, load = {seeds, spacing}}, ...} in the template's order (for act.needle),
+-- seeds = {{x, y, z}, ...} (needle by needle, deepest first, as template.seeds gives them),
+-- v100, v150 [%], d90 [Gy], reached (v100 reached coverage), voxels, candidates (holes whose
+-- track crosses the region), blocked (of those, too near an avoided region)}.
+local IMPLANT_FIELDS = { "tissue", "template", "region", "avoid", "clearance", "seeds",
+    "spacing", "needles_max", "prescription", "strength", "coverage", "v150_max", "grid",
+    "margin" }
+function ns.plan_implant(t)
+    local where = where_of(2)
+    local a = args(t, "ns.plan_implant", where, IMPLANT_FIELDS)
+    local tissue, tpl = a:get("tissue"), a:get("template")
+    if kind_of(tissue) ~= "tissue" or tissue.type ~= "shapes" then
+        a:fail("tissue must be ns.tissue.shapes{...} (got %s)", describe(tissue))
+    end
+    if kind_of(tpl) ~= "template" then
+        a:fail("template must be ns.template{...} (got %s)", describe(tpl))
+    end
+    local index, shapes = {}, {}
+    for i, r in ipairs(tissue.regions) do
+        index[r.name] = i
+        shapes[i] = r.shape
+    end
+    local function region_index(name, what)
+        if type(name) ~= "string" or not index[name] then
+            local names = {}
+            for i, r in ipairs(tissue.regions) do
+                names[i] = r.name
+            end
+            a:fail("%s must name one of the tissue's regions (%s) (got %s)", what,
+                table.concat(names, ", "), describe(name))
+        end
+        return index[name]
+    end
+    local target = region_index(a:get("region"), "region")
+    local avoid = {}
+    local av = a:get("avoid")
+    if av ~= nil then
+        if type(av) ~= "table" or kind_of(av) or #av > 32 then
+            a:fail("avoid must be a list of at most 32 region names (got %s)", describe(av))
+        end
+        for i, name in ipairs(av) do
+            avoid[i] = region_index(name, fmt("avoid[%d]", i))
+            if avoid[i] == target then
+                a:fail("avoid[%d] is the region to cover", i)
+            end
+        end
+    end
+    local function integer(k, lo, hi, default)
+        return a:number(k, function(x) return x % 1 == 0 and x >= lo and x <= hi end,
+            fmt("(an integer in [%d, %d])", lo, hi), default)
+    end
+    local holes = {}
+    for i, name in ipairs(tpl.names) do
+        holes[i] = tpl.holes[name]
+    end
+    local args_c = {
+        regions = shapes,
+        target = target,
+        avoid = avoid,
+        holes = holes,
+        direction = tpl.direction,
+        clearance = a:number("clearance", function(x) return x >= 0 and x < 0.1 end,
+            "in [0, 0.1) [m]", 2e-3),
+        seeds = integer("seeds", 1, 10000, 200),
+        spacing = a:number("spacing", function(x) return x >= SEED_LENGTH and x <= 0.05 end,
+            fmt("in [%g, 0.05] [m]", SEED_LENGTH), 1e-2),
+        needles = integer("needles_max", 1, #holes, #holes),
+        prescription = a:number("prescription", function(x) return x > 0 and x <= 1000 end,
+            "in (0, 1000] [Gy]", 145),
+        strength = a:number("strength", function(x) return x > 0 and x <= 10 end,
+            "in (0, 10] [U]", 0.5),
+        coverage = a:number("coverage", function(x) return x > 0 and x <= 1 end, "in (0, 1]",
+            0.95),
+        v150_max = a:number("v150_max", function(x) return x > 0 and x <= 100 end,
+            "in (0, 100] [%]", 60),
+        grid = a:number("grid", function(x) return x >= 1e-3 and x <= 1e-2 end,
+            "in [1e-3, 1e-2] [m]", 2e-3),
+        margin = a:number("margin", function(x) return x >= 0 and x <= 0.02 end,
+            "in [0, 0.02] [m]", 2e-3),
+    }
+    local r, why = __ns_plan_implant(args_c)
+    if not r then
+        a:fail("%s", (tostring(why):gsub("^implant plan: ", "")))
+    end
+    local plan = { needles = {}, seeds = {}, v100 = r.v100, v150 = r.v150, d90 = r.d90,
+        reached = r.reached, voxels = r.voxels, candidates = r.candidates, blocked = r.blocked }
+    for i, n in ipairs(r.needles) do
+        if n.seeds > LOAD_SEEDS_MAX then
+            a:fail("the region's span along hole %s holds %d seeds (a needle carries at most %d)",
+                tpl.names[n.hole], n.seeds, LOAD_SEEDS_MAX)
+        end
+        local load = { seeds = n.seeds, spacing = args_c.spacing }
+        local hole = tpl.names[n.hole]
+        local depth = n.deepest + load_offsets(load)[1]
+        plan.needles[i] = { hole = hole, depth = depth, load = load }
+        for _, p in ipairs(tpl.seeds(hole, depth, load)) do
+            plan.seeds[#plan.seeds + 1] = p
+        end
+    end
+    return plan
+end
+
 -- Scenario ---------------------------------------------------------------------------------
 
 local SCENARIO_FIELDS = { "name", "tissue", "description", "seed", "dt", "duration", "needle",
