@@ -5,7 +5,8 @@
  * model (plan/kinematic.h) with curvature k_c tan(psi) (the arc model's, docs/needle.md), around
  * the scenario's obstacles, and prints the plan's predicted error, least clearance, length and
  * planning time: a few lines for people, or with --json one object. -o DIR writes DIR/plan.json
- * (the same object), through a temporary file renamed into place. Exit 0 when the plan reaches
+ * (the same object) and DIR/path.csv (its path, for `run --plan DIR`), through temporary files
+ * renamed into place. Exit 0 when the plan reaches
  * the target within its tolerance and keeps the clearance, 1 when it does not or the input is
  * bad (one line on stderr), 2 for a bad command line. docs/planning.md is the contract. */
 #include <errno.h>
@@ -25,6 +26,7 @@
 #include "out_files.h"
 #include "path.h"
 #include "plan_obs.h"
+#include "plan_path_csv.h"
 #include "rrt.h"
 #include "run_spec.h"
 #include "scenario.h"
@@ -258,7 +260,9 @@ static void print_text(const PlanOpt *opt, const NsScenario *sc, const NsPlanObs
     printf("  planning time    %.2f ms\n", res->ms);
 }
 
-/* DIR/plan.json through DIR/.plan.json.part (DIR made when absent, its parent must exist). */
+/* DIR/plan.json and DIR/path.csv (the path alone, for `run --plan DIR` to draw:
+ * plan_path_csv.h), each through DIR/.NAME.part; both are renamed into place once both are
+ * written, neither when either fails. DIR is made when absent (its parent must exist). */
 static int write_out(const char *dir, const PlanOpt *opt, const NsScenario *sc, const NsPlanObs *po,
                      const PlanResult *res, const double *xyz, int npts)
 {
@@ -273,34 +277,54 @@ static int write_out(const char *dir, const PlanOpt *opt, const NsScenario *sc, 
         fprintf(stderr, "needlesim plan: -o '%s' is not a folder\n", dir);
         return 1;
     }
+    static const char *const names[2] = {"plan.json", "path.csv"};
+    static const char *const whats[2] = {"the plan", "the plan's path"};
     size_t n = strlen(dir) + 32;
-    char *fin = malloc(n), *part = malloc(n);
+    char *fin[2] = {malloc(n), malloc(n)}, *part[2] = {malloc(n), malloc(n)};
+    bool made[2] = {false, false};
     char err[1024];
     int rc = 1;
-    if (!fin || !part) {
+    if (!fin[0] || !fin[1] || !part[0] || !part[1]) {
         fprintf(stderr, "needlesim plan: out of memory\n");
-    } else {
-        snprintf(fin, n, "%s/plan.json", dir);
-        snprintf(part, n, "%s/.plan.json.part", dir);
-        FILE *f = ns_out_replaceable(fin, "the plan", err, sizeof err) == 0
-                      ? ns_out_create_part(part, "the plan", err, sizeof err)
+        goto done;
+    }
+    for (int k = 0; k < 2; k++) {
+        snprintf(fin[k], n, "%s/%s", dir, names[k]);
+        snprintf(part[k], n, "%s/.%s.part", dir, names[k]);
+        FILE *f = ns_out_replaceable(fin[k], whats[k], err, sizeof err) == 0
+                      ? ns_out_create_part(part[k], whats[k], err, sizeof err)
                       : NULL;
         if (!f) {
             fprintf(stderr, "needlesim plan: %s\n", err);
-        } else {
+            goto done;
+        }
+        made[k] = true;
+        if (k == 0)
             write_json(f, opt, sc, po, res, xyz, npts);
-            bool bad = ferror(f) != 0;
-            bad |= fclose(f) != 0;
-            if (bad || ns_out_commit(part, fin) != 0) {
-                fprintf(stderr, "needlesim plan: cannot write '%s': %s\n", fin, strerror(errno));
-                ns_out_remove_part(part);
-            } else {
-                rc = 0;
-            }
+        else
+            ns_plan_path_csv_write(f, xyz, npts);
+        bool bad = ferror(f) != 0;
+        bad |= fclose(f) != 0;
+        if (bad) {
+            fprintf(stderr, "needlesim plan: cannot write '%s': %s\n", fin[k], strerror(errno));
+            goto done;
         }
     }
-    free(fin);
-    free(part);
+    for (int k = 0; k < 2; k++) {
+        if (ns_out_commit(part[k], fin[k]) != 0) {
+            fprintf(stderr, "needlesim plan: cannot write '%s': %s\n", fin[k], strerror(errno));
+            goto done;
+        }
+        made[k] = false;
+    }
+    rc = 0;
+done:
+    for (int k = 0; k < 2; k++) {
+        if (made[k])
+            ns_out_remove_part(part[k]);
+        free(fin[k]);
+        free(part[k]);
+    }
     return rc;
 }
 

@@ -52,7 +52,7 @@ static const char run_usage[] =
     "                     [--trainee ID] [--session ID] [--rescore] [--score-row]\n"
     "                     [--no-render] [--frames] [--video FILE.mp4] [--width W]\n"
     "                     [--height H] [--frame-every K] [--view NAME | --layout A,B]\n"
-    "                     [--samples N]\n"
+    "                     [--samples N] [--plan DIR]\n"
     "                     [--quiet]\n"
     "                     [--checkpoint-at T FILE] [--resume FILE]\n";
 
@@ -124,7 +124,7 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
                    strcmp(a, "--threads") == 0 || strcmp(a, "--solver") == 0 ||
                    strcmp(a, "--record") == 0 || strcmp(a, "--replay") == 0 ||
                    strcmp(a, "--set") == 0 || strcmp(a, "--trainee") == 0 ||
-                   strcmp(a, "--session") == 0) {
+                   strcmp(a, "--session") == 0 || strcmp(a, "--plan") == 0) {
             if (!v)
                 return usage_error("%s needs a value", a);
             i++;
@@ -133,6 +133,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
                 return usage_error("%s: expected a path, got an empty string", a);
             if (strcmp(a, "-o") == 0) {
                 o->out_dir = v;
+            } else if (strcmp(a, "--plan") == 0) {
+                o->plan_dir = v;
             } else if (strcmp(a, "--set") == 0) {
                 const char *why = ns_run_opt_set(o, v);
                 if (why)
@@ -247,6 +249,8 @@ static int parse_args(int argc, char **argv, NsRunOpts *o)
         return usage_error("--checkpoint-at and --resume name the same file '%s'", o->checkpoint);
     if (o->no_render && (o->frames || o->video))
         return usage_error("%s", "--no-render with --frames or --video: which is it?");
+    if (o->no_render && o->plan_dir)
+        return usage_error("%s", "--no-render with --plan: the plan is drawn in the frames");
     if (o->no_render && (o->width || o->height || o->frame_every || o->nviews || o->samples))
         return usage_error("%s", "--no-render with --width, --height, --frame-every, --samples "
                                  "or a view");

@@ -775,6 +775,7 @@ void ns_run_free(NsRun *r)
         luaL_unref(L, LUA_REGISTRYINDEX, r->co_ref);
     if (r->have_steer)
         ns_run_steer_free(&r->steer);
+    free(r->prior_plan);
     ns_run_dosimetry_free(r);
     ns_run_video_free(&r->cues);
     ns_run_debrief_free(&r->debrief);

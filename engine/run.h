@@ -45,6 +45,8 @@ typedef struct NsRunOpts {
     /* checkpoints (docs/checkpoints.md): --checkpoint-at T FILE, --resume FILE */
     const char *checkpoint, *resume;
     double checkpoint_at;
+    /* --plan DIR: DIR/path.csv (`needlesim plan -o DIR`) drawn in the frames */
+    const char *plan_dir;
     bool threads_given, solver_given;
 } NsRunOpts;
 
@@ -200,6 +202,8 @@ typedef struct NsRun {
     void *report_ctx;
     NsRunSteer steer;
     bool have_steer;
+    double *prior_plan; /* (prior_plan_n x 3) --plan DIR's path [m], drawn in frames; or NULL */
+    int prior_plan_n;
     struct NsRunDose *dose; /* dosimetry = {...} (engine/run_dosimetry.c), or NULL */
     NsRunCues cues;         /* the authored video's (engine/run_video.c) */
     NsRunDebrief debrief;   /* engine/run_debrief.c */

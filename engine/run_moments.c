@@ -20,6 +20,7 @@
 #include "ns_config.h"
 #include "ns_limits.h"
 #include "out_files.h"
+#include "plan_path_csv.h"
 #include "quality.h"
 #include "remesh.h"
 #include "rod.h"
@@ -57,6 +58,19 @@ int ns_run_render_setup(NsRun *r, char *err, int err_sz)
     for (int k = 0; k < r->spec.obstacle_count; k++)
         if (r->spec.obstacles[k].region < regions)
             r->obstacle_region[r->spec.obstacles[k].region] = true;
+    if (r->opt.plan_dir) { /* --plan DIR: its path.csv, drawn in every frame */
+        size_t n = strlen(r->opt.plan_dir) + 16;
+        char *path = malloc(n);
+        if (!path) {
+            ns_set_err(err, err_sz, "out of memory");
+            return -1;
+        }
+        snprintf(path, n, "%s/path.csv", r->opt.plan_dir);
+        int rc = ns_plan_path_csv_read(path, &r->prior_plan, &r->prior_plan_n, err, err_sz);
+        free(path);
+        if (rc)
+            return -1;
+    }
     NsRunRenderOpts o = {.out_dir = r->opt.out_dir,
                          .frames = r->opt.frames,
                          .video = r->opt.video,
@@ -195,6 +209,8 @@ int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResu
             in.plan_x = r->steer.plan;
             in.plan_n = r->steer.plan_n;
         }
+        in.prior_x = r->prior_plan; /* --plan DIR */
+        in.prior_n = r->prior_plan_n;
         ns_run_dosimetry_isodose(r, &in); /* the 100 % and 150 % lines, with dosimetry */
     }
     char l0[160], l1[160], l2[160], l3[160];

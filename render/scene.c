@@ -523,12 +523,11 @@ static int build_solids(const NsSceneInput *in, NsScene *s)
     return 0;
 }
 
-/* The planned path: a tube a third of the needle's width (at least 1.5 pixels), light blue
+/* A planned path: a tube a third of the needle's width (at least 1.5 pixels), light blue
  * like the paper's predicted helices (§5). */
-static int build_plan(const NsSceneInput *in, NsScene *s)
+static int build_path(const NsSceneInput *in, const double *x, int n, NsScene *s)
 {
-    int n = in->plan_n;
-    if (!in->plan_x || n < 2)
+    if (!x || n < 2)
         return 0;
     uint8_t(*rgb)[3] = malloc((size_t)n * sizeof *rgb);
     if (!rgb)
@@ -536,10 +535,16 @@ static int build_plan(const NsSceneInput *in, NsScene *s)
     for (int k = 0; k < n; k++)
         memcpy(rgb[k], ns_scene_plan_rgb, 3);
     double px = in->px_size > 0.0 ? in->px_size : 0.0;
-    int rc = tube(&s->solid, in->plan_x, n, fmax(0.35 * in->rod_radius, 1.5 * px),
-                  (const uint8_t(*)[3])rgb, NULL);
+    int rc = tube(&s->solid, x, n, fmax(0.35 * in->rod_radius, 1.5 * px), (const uint8_t(*)[3])rgb,
+                  NULL);
     free(rgb);
     return rc;
+}
+
+/* act.steer's predicted arc and a plan made before the run. */
+static int build_plan(const NsSceneInput *in, NsScene *s)
+{
+    return build_path(in, in->plan_x, in->plan_n, s) || build_path(in, in->prior_x, in->prior_n, s);
 }
 
 /* ---- isodose lines on the cut face ---- */

@@ -108,6 +108,9 @@ typedef struct NsSceneInput {
      * (plan_n x 3) points [m], drawn as a thin tube in ns_scene_plan_rgb. NULL: none. */
     const double *plan_x;
     int plan_n;
+    /* a path planned before the run (`run --plan DIR`), drawn the same way; NULL: none */
+    const double *prior_x;
+    int prior_n;
     double px_size; /* the world size of one pixel at the scene's centre, for minimum sizes */
 } NsSceneInput;
 

@@ -190,6 +190,7 @@ static int avoids(void)
     long voxels;
     ENSURE_SMALL(v100(&f, &pl, -1, &voxels) - pl.v100, 1e-9);
     ENSURE(voxels == pl.voxels);
+    ns_implant_plan_free(&pl);
     /* a clearance no track keeps: refused, saying so */
     f.p.clearance = 0.05;
     ENSURE(ns_plan_implant(&f.p, &pl, err, sizeof err) == -1);

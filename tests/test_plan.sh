@@ -1,8 +1,10 @@
 #!/bin/bash
 # `needlesim plan` end to end (docs/planning.md): on two_cylinders the --json object has the
 # contract's keys, keeps the clearance asked for and reaches the goal within its tolerance, for
-# both methods; -o DIR writes DIR/plan.json and nothing else; the same seed gives the same plan;
-# an unknown target, a bad option and an impossible clearance exit non-zero with one line.
+# both methods; -o DIR writes DIR/plan.json and DIR/path.csv (the same points) and nothing else;
+# the same seed gives the same plan; an unknown target, a bad option and an impossible clearance
+# exit non-zero with one line. `run --plan DIR` draws the path in the frames (light blue where a
+# run without it has none); a bad path.csv stops the run before it writes anything.
 #
 # usage: tests/test_plan.sh NEEDLESIM_BINARY SOURCE_ROOT
 set -u
@@ -84,12 +86,50 @@ grep -v planning_ms "$OUT" >"$TMP/b"
 if cmp -s "$TMP/a" "$TMP/b"; then pass "same seed, same plan"; else fail "same seed, same plan" "differ"; fi
 
 run plan $SC --target goal -o "$TMP/out"
-if [ $RC = 0 ] && [ -f "$TMP/out/plan.json" ] && [ "$(ls -A "$TMP/out")" = plan.json ]; then
-    check_plan "plan -o DIR writes DIR/plan.json alone" "$TMP/out/plan.json" 1
+if [ $RC = 0 ] && [ -f "$TMP/out/plan.json" ] &&
+    [ "$(ls -A "$TMP/out" | tr '\n' ' ')" = "path.csv plan.json " ]; then
+    check_plan "plan -o DIR writes DIR/plan.json and DIR/path.csv alone" "$TMP/out/plan.json" 1
 else
     fail "plan -o DIR" "exit $RC, folder: $(ls -A "$TMP/out" 2>&1)"
 fi
 grep -q "predicted error" "$OUT" && pass "text output" || fail "text output" "no 'predicted error'"
+if python3 - "$TMP/out" <<'PY'
+import csv, json, sys
+path = json.load(open(sys.argv[1] + "/plan.json"))["path"]
+rows = list(csv.reader(open(sys.argv[1] + "/path.csv")))
+assert rows[0] == ["x_m", "y_m", "z_m"], rows[0]
+assert [[float(v) for v in r] for r in rows[1:]] == path, "path.csv differs from plan.json's path"
+print("    %d points" % len(path))
+PY
+then
+    pass "path.csv holds plan.json's path, point for point"
+else
+    fail "path.csv" "differs from plan.json"
+fi
+
+# run --plan DIR: the plan's path in the frames, light blue (ns_scene_plan_rgb, lit), where the
+# same run without it has none (two_cylinders runs no act.steer)
+light_blue() { # PNG -> the count of its light-blue pixels
+    PYTHONPATH="$ROOT/tests" python3 -B -c '
+import sys, png_rgb
+w, h, rows = png_rgb.read(sys.argv[1])
+print(sum(1 for r in rows for i in range(0, 3 * w, 3)
+          if r[i + 2] > 200 and r[i + 1] > 170 and r[i] < 190 and r[i + 2] - r[i] > 40))' "$1"
+}
+run run $SC --plan "$TMP/out" --steps 200 --frames --frame-every 200 -o "$TMP/with" --quiet
+with=$RC
+run run $SC --steps 200 --frames --frame-every 200 -o "$TMP/without" --quiet
+if [ $with = 0 ] && [ $RC = 0 ]; then
+    a=$(light_blue "$TMP/with/frames/000001.png")
+    b=$(light_blue "$TMP/without/frames/000001.png")
+    if [ "$a" -gt 200 ] && [ "$b" = 0 ]; then
+        pass "run --plan DIR draws the path: $a light-blue pixels at step 200, none without it"
+    else
+        fail "run --plan DIR" "$a light-blue pixels with the plan, $b without"
+    fi
+else
+    fail "run --plan DIR" "exit $with / $RC"
+fi
 
 # expect_fail NAME STATUS TEXT -- ARGS: exit STATUS, one line on stderr holding TEXT
 expect_fail() {
@@ -120,6 +160,32 @@ expect_fail "clearance no path keeps" 1 "rrt: no path with 20 mm clearance" -- \
 [ ! -e "$TMP/none/plan.json" ] && pass "no plan.json after a failure" || fail "failure wrote" "plan.json"
 echo '{' >"$TMP/file"
 expect_fail "-o onto a file" 1 "is not a folder" -- plan $SC --target goal -o "$TMP/file"
+
+# bad path.csv files: refused at their line, the run's folder not made
+bad_path() { # NAME TEXT CONTENT
+    mkdir -p "$TMP/bad"
+    printf '%b' "$3" >"$TMP/bad/path.csv"
+    rm -rf "$TMP/badrun"
+    expect_fail "run --plan: $1" 1 "$2" -- run $SC --plan "$TMP/bad" --steps 2 -o "$TMP/badrun"
+    [ ! -e "$TMP/badrun" ] || fail "run --plan: $1" "the run's folder was made"
+}
+bad_path "no header" "path.csv:1: expected the header x_m,y_m,z_m" '0,0,0\n1,1,1\n'
+bad_path "a NaN" "path.csv:3: a coordinate is not a finite number within 10 m" \
+    'x_m,y_m,z_m\n0,0,0\nnan,0,0\n'
+bad_path "two numbers" "path.csv:2: expected three numbers x_m,y_m,z_m" 'x_m,y_m,z_m\n0,0\n'
+bad_path "a fourth number" "path.csv:2: expected three numbers x_m,y_m,z_m (something follows" \
+    'x_m,y_m,z_m\n0,0,0,0\n0,0,1\n'
+bad_path "one point" "path.csv:3: a path needs at least 2 points" 'x_m,y_m,z_m\n0,0,0\n'
+bad_path "far away" "path.csv:2: a coordinate is not a finite number within 10 m" \
+    'x_m,y_m,z_m\n1e9,0,0\n0,0,0\n'
+bad_path "empty" "path.csv:1: empty" ''
+rm -f "$TMP/bad/path.csv"
+mkfifo "$TMP/bad/path.csv"
+expect_fail "run --plan: a FIFO" 1 "is a FIFO (named pipe), not a plan path" -- run $SC --plan "$TMP/bad" --steps 2 -o "$TMP/badrun"
+rm -f "$TMP/bad/path.csv"
+expect_fail "run --plan: no path.csv" 1 "path.csv" -- run $SC --plan "$TMP/bad" --steps 2 -o "$TMP/badrun"
+expect_fail "run --plan with --no-render" 2 "--no-render with --plan" -- \
+    run $SC --plan "$TMP/out" --no-render
 
 echo "$PASSED passed, $FAILED failed"
 [ "$FAILED" = 0 ]
