@@ -79,6 +79,9 @@ typedef struct NsRunSteer {
     int way_n;
     double *plan; /* (plan_n x 3) the last replan's predicted arc, every mm [m] (frames draw it) */
     int plan_n;
+    int rollouts;        /* planner.rollout calls (engine/run_rollout.c) */
+    long rollout_steps;  /* their steps of the world's copy, in all */
+    NsSeries rollout_ms; /* wall time of each [ms] (measured only) */
 } NsRunSteer;
 
 /* The debrief (engine/run_debrief.c, docs/rendering.md "The debrief"): what a trainee is told
@@ -263,6 +266,8 @@ int ns_run_script_start(NsRun *r, char *err, int err_sz);
 int ns_run_script_tick(NsRun *r, double t, int exited, const NsControl *given, int *more,
                        NsControl *ctl, char *err, int err_sz);
 int ns_run_script_replay_tick(NsRun *r, long k, char *err, int err_sz);
+/* engine/run_rollout.c: planner.rollout{length, speed}, the curvature a copy of the world gives */
+int ns_run_l_rollout(struct lua_State *L);
 /* engine/run_steer.c: `sim.planner` (act.steer, ns.plan) and the report's `steering` */
 int ns_run_steer_setup(NsRun *r, char *err, int err_sz);
 void ns_run_steer_free(NsRunSteer *s);

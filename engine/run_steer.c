@@ -62,6 +62,7 @@ void ns_run_steer_free(NsRunSteer *s)
     free(s->way);
     free(s->plan);
     free(s->ms.v);
+    free(s->rollout_ms.v);
     memset(s, 0, sizeof *s);
 }
 
@@ -442,11 +443,9 @@ static int l_plan(lua_State *L)
 
 void ns_run_steer_push(lua_State *L, NsRun *r)
 {
-    static const luaL_Reg fns[] = {{"choose", l_choose},
-                                   {"track", l_track},
-                                   {"plan", l_plan},
-                                   {"finish", l_finish},
-                                   {NULL, NULL}};
+    static const luaL_Reg fns[] = {
+        {"choose", l_choose},          {"track", l_track}, {"plan", l_plan}, {"finish", l_finish},
+        {"rollout", ns_run_l_rollout}, {NULL, NULL}};
     lua_createtable(L, 0, 6);
     lua_pushlightuserdata(L, r);
     luaL_setfuncs(L, fns, 1);
@@ -508,5 +507,14 @@ void ns_run_steer_report(NsJson *j, const NsRun *r, const NsRunResults *res)
     ns_json_number(j, s->kappa);
     ns_json_key(j, "kappa_estimate_per_m");
     ns_json_number(j, s->kappa_estimate);
+    ns_json_key(j, "rollouts");
+    ns_json_int(j, s->rollouts);
+    ns_json_key(j, "rollout_steps");
+    ns_json_int(j, (int)s->rollout_steps);
+    ns_json_key(j, "rollout_ms_median");
+    if (s->rollouts > 0)
+        ns_json_number(j, ns_series_quantile(&s->rollout_ms, 0.5));
+    else
+        ns_json_null(j);
     ns_json_end_object(j);
 }

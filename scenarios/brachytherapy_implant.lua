@@ -78,9 +78,10 @@ end
 
 local first = template.entry(needles[1].hole)
 local count = ns.param("needles", #needles)
--- The whole implant takes about 140 s of simulated time, past the 120 s a run without a
--- duration is given (docs/reliability.md): the duration leaves the tissue a few seconds to settle.
-local duration = count >= #needles and 150 or nil
+-- The whole implant takes about 6.4 s of simulated time a needle (140 s for the 22 of the hand
+-- plan), past the 120 s a run without a duration is given (docs/reliability.md): the duration
+-- leaves the tissue a few seconds to settle.
+local duration = count >= #needles and math.max(150, 6.6 * #needles) or nil
 
 return ns.scenario {
   name = "prostate seed implant",

@@ -27,6 +27,9 @@ local R = 0.003 -- vessel radius [m] (a portal vein branch)
 local METHOD = ns.param("method", "rrt")
 local EVERY = ns.param("replan_every", 2e-3) -- [m]
 local STEERING = ns.param("steering", "arc") -- the needle's steering model (docs/needle.md)
+-- --set rollout=true: act.steer measures the curvature by a rollout in the simulator before
+-- each replan instead of estimating it from the tip's path (docs/planning.md)
+local ROLLOUT = ns.param("rollout", false)
 
 -- Liver-like (an estimate): published liver moduli spread widely with method, rate and
 -- preconditioning, from a few kPa (in vivo elastography of healthy human liver, e.g. Sandrin et
@@ -70,6 +73,6 @@ return ns.scenario {
     obstacles = { { name = "vessel", region = "vessel" } },
     script = function()
         act.steer { target = "lesion", avoid = { "vessel" }, clearance = 1e-3, method = METHOD,
-            replan_every = EVERY, speed = 0.01 }
+            replan_every = EVERY, speed = 0.01, rollout = ROLLOUT }
     end,
 }

@@ -113,6 +113,38 @@ expect_error "steer: unknown field" "act.steer: unknown field 'bogus'" \
 expect_error "plan: clearance" "ns.plan: clearance must be a number >= 0 [m] (got -1)" \
     'ns.plan { target = "goal", clearance = -1 }'
 expect_error "plan: not a table" "ns.plan: expected a table of fields" 'ns.plan(3)'
+expect_error "steer: rollout not a boolean" "act.steer: rollout must be true or false (got number)" \
+    'act.steer { target = "goal", rollout = 1 }'
+
+# Rollouts in the simulator (docs/planning.md): a copy of the world stepped 20 steps ends where
+# the run's own tip then goes, bit for bit, and the run's state hash is the same without the
+# call; a run that writes a checkpoint refuses rollouts.
+for model in force; do
+    "$BIN" run "$ROOT/tests/data/rollout.lua" --no-render -o "$TMP/ro" --set steering=$model \
+        >"$OUT" 2>"$ERR"
+    rc1=$?
+    cp "$ERR" "$TMP/ro_err"
+    h1=$(grep -o 'state hash [0-9a-f]*' "$OUT" "$ERR" | head -1 | awk '{print $3}')
+    "$BIN" run "$ROOT/tests/data/rollout.lua" --no-render -o "$TMP/ro2" --set steering=$model \
+        --set rollout=false >"$OUT" 2>"$ERR"
+    rc2=$?
+    h2=$(grep -o 'state hash [0-9a-f]*' "$OUT" "$ERR" | head -1 | awk '{print $3}')
+    line=$(grep '^rollout: ' "$TMP/ro_err")
+    ends=$(echo "$line" | sed -n 's/.* end \(.*\); the run.s tip \(.*\)$/\1|\2/p')
+    if [ $rc1 = 0 ] && [ $rc2 = 0 ] && [ -n "$ends" ] && [ "${ends%|*}" = "${ends#*|}" ] &&
+        [ -n "$h1" ] && [ "$h1" = "$h2" ]; then
+        pass "rollout ($model model): ends where the run goes, bit for bit; state hash $h1 with and without it"
+    else
+        fail "rollout ($model model)" "exit $rc1/$rc2, ends '$ends', hashes '$h1' '$h2'"
+    fi
+done
+(cd "$ROOT" && "$BIN" run "$ROOT/tests/data/rollout.lua" --no-render -o "$TMP/ro3" \
+    --checkpoint-at 0.7 "$TMP/ro3.ck") >"$OUT" 2>"$ERR"
+if [ $? != 0 ] && grep -qF "rollouts read the world at their tick" "$ERR" && [ ! -e "$TMP/ro3" ]; then
+    pass "rollout refused in a run that writes a checkpoint"
+else
+    fail "rollout with --checkpoint-at" "not refused"
+fi
 
 # bench --planning: the contract's keys (one layout: its open and closed loop runs; the bars are
 # the benchmark's, docs/planning.md)

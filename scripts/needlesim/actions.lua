@@ -493,7 +493,7 @@ local function plan_fields(t, name, extra)
 end
 
 --- act.steer{target, avoid, clearance, replan_every, max_depth, method, speed, twist_rate,
--- seed, tolerance}: closed-loop steering (Hauser et al. 2009; docs/planning.md). Every
+-- seed, tolerance, rollout}: closed-loop steering (Hauser et al. 2009; docs/planning.md). Every
 -- `replan_every` [m] of insertion (default 2 mm) it reads the tip's pose (position, direction,
 -- bevel direction) and where the tissue has carried the target named `target`, asks the
 -- planner for the twist and duty cycle whose predicted arc passes closest to it ("helix", the
@@ -502,14 +502,16 @@ end
 -- twist (at `twist_rate` [rad/s], default 4 pi, the insertion paused), and inserts at `speed`
 -- [m/s] (default 0.01): the bevel held for (1 - duty) of the segment, then spun one whole turn
 -- over the rest (duty-cycled spinning). The curvature the planner predicts with is estimated
--- from the tip's measured turning while the bevel was held. It stops when the tip passes its
+-- from the tip's measured turning while the bevel was held; with `rollout = true` it is
+-- measured before each replan instead, by a rollout in the simulator (a copy of the world
+-- stepped `replan_every`, at least 4 mm, at `speed` with the bevel held). It stops when the tip passes its
 -- closest approach to the target (the target no longer ahead of it) or at `max_depth` [m] of
 -- depth (default: the depth now plus 1.5 x the distance to the target). Returns the tip's
 -- distance to the target at the end [m].
 function act.steer(t)
     running()
     fields(t, "steer", { "target", "avoid", "clearance", "replan_every", "max_depth", "method",
-        "speed", "twist_rate", "seed", "tolerance" })
+        "speed", "twist_rate", "seed", "tolerance", "rollout" })
     local f = plan_fields(t, "steer", 0)
     local method = f.method or "helix"
     local every = number(t, "steer", "replan_every", function(x) return x >= 1e-4 and x <= 0.1 end,
@@ -517,6 +519,10 @@ function act.steer(t)
     local speed = number(t, "steer", "speed", speed_ok, speed_what(), 0.01)
     local twist_rate = number(t, "steer", "twist_rate", rate_ok, rate_what(), 4 * math.pi)
     local tol = number(t, "steer", "tolerance", GT0, "> 0 [m]", 1e-3)
+    local rollout = t.rollout
+    if rollout ~= nil and type(rollout) ~= "boolean" then
+        error(fmt("act.steer: rollout must be true or false (got %s)", type(rollout)), 2)
+    end
     local q0, p0 = sim.targets[f.target], sim.tip
     local far = math.sqrt((q0[1] - p0[1]) ^ 2 + (q0[2] - p0[2]) ^ 2 + (q0[3] - p0[3]) ^ 2)
     local max_depth = number(t, "steer", "max_depth", GT0, "> 0 [m]", sim.depth + 1.5 * far)
@@ -529,7 +535,7 @@ function act.steer(t)
     -- the tip's path: arc length travelled [m] and positions, for the path's own tangent (a
     -- chord over the last CHORD metres: the tip's last edge leans towards the bevel more than
     -- the path it cuts, so its direction overstates the curvature)
-    local CHORD, PRIOR = 6e-3, 10
+    local CHORD, PRIOR, ROLLOUT_MIN = 6e-3, 10, 4e-3
     local trail_p = { copy3(sim.tip) }
     local function chord()
         local n = #trail_p
@@ -593,6 +599,10 @@ function act.steer(t)
     track()
     local replans = 0
     while not done() and not sim.bone_contact do
+        if rollout then -- the curvature a copy of the world gives the needle from here
+            local ro = P.rollout { length = math.max(every, ROLLOUT_MIN), speed = speed }
+            kappa = math.max(0.05 * P.kappa, math.min(3 * P.kappa, ro.kappa))
+        end
         local a = P.choose { tip = sim.tip, t = dir(), m2 = sim.bevel_direction,
             target = sim.targets[f.target], kappa = kappa, method = method, avoid = f.avoid,
             clearance = f.clearance, tolerance = tol, seed = f.seed + replans }
@@ -623,8 +633,10 @@ function act.steer(t)
             held = held + h * h
         end
         local prior = PRIOR * every * every
-        kappa = math.max(0.5 * P.kappa, math.min(2 * P.kappa,
-            (turned + P.kappa * prior) / (held + prior)))
+        if not rollout then
+            kappa = math.max(0.5 * P.kappa, math.min(2 * P.kappa,
+                (turned + P.kappa * prior) / (held + prior)))
+        end
     end
     stop()
     P.finish() -- its predicted arc is no longer drawn in the frames
