@@ -282,6 +282,9 @@ int ns_live_render_draw(NsLiveRender *lr, const NsLiveSnap *s, double fps, doubl
     in.has_cut_normal = sp->camera.has_cut_normal;
     memcpy(in.cut_normal, sp->camera.cut_normal, sizeof in.cut_normal);
     in.tet_edges = sp->camera.tet_edges;
+    /* the 100 % and 150 % isodose lines of the seeds placed so far, with dosimetry (the
+     * callback reads only what the run set up before the session: the render thread may) */
+    ns_run_dosimetry_isodose(r, &in);
     int near_i = -1;
     double near = INFINITY;
     for (int i = 0; i < s->targets; i++) {

@@ -342,7 +342,7 @@ void ns_run_dosimetry_free(NsRun *r);
 /* The isodose lines (100 % and 150 % of the prescription) on a frame's cut face: sets the
  * scene input's dose callback when the run has dosimetry. */
 struct NsSceneInput;
-void ns_run_dosimetry_isodose(NsRun *r, struct NsSceneInput *in);
+void ns_run_dosimetry_isodose(const NsRun *r, struct NsSceneInput *in);
 /* The DVH of region 0 prostate, 1 urethra, 2 rectum, planned (delivered 0) or delivered; NULL
  * before the run's end or without dosimetry. */
 const struct NsDvh *ns_run_dosimetry_dvh(const NsRun *r, int delivered, int region);

@@ -467,12 +467,12 @@ static int scene_dose(void *ctx, const double *seed_x, int n_seeds, const double
     return rc;
 }
 
-void ns_run_dosimetry_isodose(NsRun *r, NsSceneInput *in)
+void ns_run_dosimetry_isodose(const NsRun *r, NsSceneInput *in)
 {
     if (!r->dose)
         return;
     in->dose_points = scene_dose;
-    in->dose_ctx = r;
+    in->dose_ctx = (void *)r; /* read only: the source, the axis and the strength */
     in->iso_levels[0] = r->spec.dosimetry.prescription;
     in->iso_levels[1] = 1.5 * r->spec.dosimetry.prescription;
     in->iso_count = 2;

@@ -6,6 +6,8 @@ the end. Uses apt's python3-websockets (tools/quickstart.sh).
     live_client.py session URL      drive a session through the checks, then end it
     live_client.py token URL        the token checks of a session bound to 0.0.0.0
     live_client.py scripted URL     a live.script set-up: controls refused until it hands over
+    live_client.py isodose URL DIR  brachytherapy: the needle in 35 mm, a seed dropped; the
+                                    frames before and after it into DIR/before.jpg, after.jpg
 
 Exits 0 when every check held, 1 with the failed check on stderr. No timing is asserted
 beyond generous liveness timeouts."""
@@ -48,11 +50,12 @@ def mjpeg_first_frame(url):
 
 
 class Client:
-    """One WebSocket connection: frames counted, the latest state, roles and errors kept."""
+    """One WebSocket connection: frames counted (the latest kept), the latest state, roles and
+    errors kept."""
 
     def __init__(self, ws):
         self.ws, self.frames, self.state, self.role, self.errors = ws, 0, None, None, []
-        self.ended = False
+        self.ended, self.jpeg = False, None
 
     async def pump(self, until, timeout=WAIT):
         """Reads messages until until(self) holds."""
@@ -62,6 +65,7 @@ class Client:
                 if isinstance(m, bytes):
                     check(m[:2] == b"\xff\xd8" and m[-2:] == b"\xff\xd9", "a JPEG frame (SOI, EOI)")
                     self.frames += 1
+                    self.jpeg = m
                     continue
                 d = json.loads(m)
                 if "error" in d:
@@ -194,11 +198,36 @@ async def scripted(url):
             pass
 
 
+async def isodose(url, out):
+    async with websockets.connect(ws_url(url), max_size=None) as ws:
+        c = Client(ws)
+        await c.pump(lambda c: c.state is not None and c.frames >= 2)
+        await ws.send(json.dumps({"insert_speed": 0.02}))
+        await c.pump(lambda c: c.state["depth_m"] > 0.035)
+        await ws.send(json.dumps({"insert_speed": 0}))
+        f = c.frames
+        await c.pump(lambda c: c.frames >= f + 2)
+        open(out + "/before.jpg", "wb").write(c.jpeg)
+        await ws.send(json.dumps({"drop_seed": True}))
+        await c.pump(lambda c: c.state["seeds"] >= 1)
+        f = c.frames
+        await c.pump(lambda c: c.frames >= f + 3)
+        open(out + "/after.jpg", "wb").write(c.jpeg)
+        await ws.send(json.dumps({"end": True}))
+        try:
+            await c.pump(lambda c: c.ended)
+        except websockets.ConnectionClosed:
+            pass
+
+
 def main():
     mode, url = sys.argv[1], sys.argv[2]
     try:
-        run = {"session": session, "token": token, "scripted": scripted}[mode]
-        asyncio.run(run(url))
+        if mode == "isodose":
+            asyncio.run(isodose(url, sys.argv[3]))
+        else:
+            run = {"session": session, "token": token, "scripted": scripted}[mode]
+            asyncio.run(run(url))
     except (AssertionError, asyncio.TimeoutError, OSError, websockets.WebSocketException) as e:
         print("live_client %s: %s: %s" % (mode, type(e).__name__, e), file=sys.stderr)
         return 1

@@ -227,6 +227,32 @@ else
     fail "brachytherapy session and replay" "$(tail -2 "$TMP/brachy.err" "$TMP/replay5.err" 2>&1)"
 fi
 
+# ---- isodose lines in live frames (docs/live.md): the 100 % line (ns_scene_iso_rgb's yellow)
+# round a seed dropped in a brachytherapy session, none before it; the JPEGs decoded by ffmpeg --
+OUT6="$TMP/iso"
+mkdir -p "$OUT6/frames"
+if start iso "$SRC/scenarios/brachytherapy.lua" --port 0 -o "$OUT6" --width 960 --height 540 &&
+    "$PY" "$SRC/tests/live_client.py" isodose "$URL" "$OUT6/frames" &&
+    wait_exit "$PID" 120 &&
+    for f in before after; do
+        ffmpeg -v error -y -i "$OUT6/frames/$f.jpg" -f rawvideo -pix_fmt rgb24 \
+            "$OUT6/frames/$f.rgb" || exit 1
+    done &&
+    "$PY" - "$OUT6/frames" >"$TMP/iso.count" <<'PY'; then
+import sys
+def yellow(path):  # near (255, 230, 40): JPEG's error allowed, not the gland's pinks or the HUD
+    d = open(path, "rb").read()
+    return sum(1 for i in range(0, len(d), 3)
+               if d[i] > 215 and 190 < d[i + 1] < 250 and d[i + 2] < 110)
+b, a = yellow(sys.argv[1] + "/before.rgb"), yellow(sys.argv[1] + "/after.rgb")
+print("%d yellow pixels before the seed, %d after" % (b, a))
+assert b < 10 and a >= 40, (b, a)  # measured: 0 and 106 at 960 x 540
+PY
+    pass "isodose: a brachytherapy session's frames draw the 100 % line round its seed ($(cat "$TMP/iso.count"))"
+else
+    fail "isodose in live frames" "$(cat "$TMP/iso.count" 2>/dev/null) $(tail -2 "$TMP/iso.err")"
+fi
+
 # ---- the scenario's live = {accuracy, front}: refused at load when it cannot be met ----
 n=0
 for v in 'front = "brachytherapy"' 'accuracy = -1' 'accuracy = 1e-9, front = "brachytherapy"' \
