@@ -310,7 +310,7 @@ static int write_out(const char *dir, const PlanOpt *opt, const NsScenario *sc, 
             goto done;
         }
     }
-    for (int k = 0; k < 2; k++) {
+    for (int k = 1; k >= 0; k--) { /* path.csv first: plan.json's rename marks the plan */
         if (ns_out_commit(part[k], fin[k]) != 0) {
             fprintf(stderr, "needlesim plan: cannot write '%s': %s\n", fin[k], strerror(errno));
             goto done;

@@ -463,6 +463,12 @@ int ns_cmd_run(int argc, char **argv)
     if (pa)
         return pa == 1 ? 0 : pa;
     char err[1024] = "";
+    if (ns_run_prior_plan_read(&r, err, sizeof err)) { /* before -o's folder is made */
+        ns_one_line(err);
+        fprintf(stderr, "needlesim: %s\n", err);
+        ns_run_free(&r);
+        return 1;
+    }
     ns_cleanup_install();
     int rc = ns_run_outputs_prepare(&r, err, sizeof err) ? -2 : -1;
     /* --record and the checkpoint checked once -o's folder exists (they may be inside it). */

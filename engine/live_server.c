@@ -46,7 +46,8 @@ typedef struct Client {
     struct mg_connection *conn;
     NsLiveServer *srv;
     pthread_t sender;
-    bool sender_started;
+    bool starting;       /* (srv->mu) published, its sender not yet started */
+    bool sender_started; /* (srv->mu while starting) */
     atomic_bool closing;
     atomic_bool controller;
     atomic_bool done; /* the sender has returned (after the end, when the session is over) */
@@ -276,6 +277,7 @@ static void ws_ready(struct mg_connection *conn, void *cb)
         free(c);
         return;
     }
+    c->starting = true;
     srv->clients[srv->nclients++] = c;
     if (!srv->controller) {
         srv->controller = c;
@@ -284,10 +286,13 @@ static void ws_ready(struct mg_connection *conn, void *cb)
     pthread_mutex_unlock(&srv->mu);
     mg_set_user_connection_data(conn, c);
     ns_live_session_clients(srv->s, 1);
-    if (pthread_create(&c->sender, NULL, sender_main, c) != 0)
+    bool ok = pthread_create(&c->sender, NULL, sender_main, c) == 0;
+    if (!ok)
         atomic_store(&c->closing, true); /* no frames; ws_close still cleans up */
-    else
-        c->sender_started = true;
+    pthread_mutex_lock(&srv->mu);
+    c->sender_started = ok;
+    c->starting = false;
+    pthread_mutex_unlock(&srv->mu);
 }
 
 /* A client's message: a control from the controlling client, an error for anything else. */
@@ -437,8 +442,10 @@ static bool senders_done(NsLiveServer *srv)
 {
     pthread_mutex_lock(&srv->mu);
     bool done = true;
-    for (int i = 0; i < srv->nclients; i++)
-        done = done && (!srv->clients[i]->sender_started || atomic_load(&srv->clients[i]->done));
+    for (int i = 0; i < srv->nclients; i++) {
+        const Client *c = srv->clients[i];
+        done = done && !c->starting && (!c->sender_started || atomic_load(&c->done));
+    }
     pthread_mutex_unlock(&srv->mu);
     return done;
 }

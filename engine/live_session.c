@@ -583,14 +583,25 @@ oom:
     return -1;
 }
 
+/* The board says the session is over: the clients' senders send the end and stop. */
+static void board_over(NsLiveSession *s)
+{
+    pthread_mutex_lock(&s->board_mu);
+    s->over = true;
+    pthread_cond_broadcast(&s->board_cv);
+    pthread_mutex_unlock(&s->board_mu);
+}
+
 int ns_live_session_run(NsLiveSession *s, char *err, int err_sz)
 {
     if (publish(s, false)) { /* the first frame: the state as built */
         ns_set_err(err, err_sz, "out of memory");
+        board_over(s);
         return -1;
     }
     if (pthread_create(&s->render, NULL, render_main, s)) {
         ns_set_err(err, err_sz, "cannot start the render thread");
+        board_over(s);
         return -1;
     }
     s->render_started = true;
@@ -612,10 +623,7 @@ int ns_live_session_run(NsLiveSession *s, char *err, int err_sz)
     pthread_mutex_unlock(&s->mu);
     pthread_join(s->render, NULL);
     s->render_started = false;
-    pthread_mutex_lock(&s->board_mu);
-    s->over = true;
-    pthread_cond_broadcast(&s->board_cv);
-    pthread_mutex_unlock(&s->board_mu);
+    board_over(s);
     return rc;
 }
 

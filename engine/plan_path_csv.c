@@ -51,34 +51,51 @@ int ns_plan_path_csv_read(const char *path, double **xyz, int *n, char *err, int
 {
     *xyz = NULL;
     *n = 0;
-    int fd = ns_file_open_regular(path, FILE_MAX_BYTES, "plan path", NULL, err, err_sz);
-    FILE *f = fd >= 0 ? fdopen(fd, "r") : NULL;
-    if (!f) {
-        if (fd >= 0) {
-            ns_set_err(err, err_sz, "%s: cannot open: %s", path, strerror(errno));
-            close(fd);
-        }
+    long long size = 0;
+    int fd = ns_file_open_regular(path, FILE_MAX_BYTES, "plan path", &size, err, err_sz);
+    if (fd < 0)
+        return -1;
+    char *buf = malloc((size_t)size + 1);
+    long long got = 0;
+    while (buf && got < size) {
+        ssize_t k = read(fd, buf + got, (size_t)(size - got));
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k <= 0)
+            break;
+        got += k;
+    }
+    close(fd);
+    if (!buf || got != size) {
+        ns_set_err(err, err_sz, "%s: %s", path, buf ? "cannot read it whole" : "out of memory");
+        free(buf);
         return -1;
     }
-    char line[LINE_MAX_B + 2];
+    buf[size] = '\0';
     long lineno = 0;
     int count = 0, cap = 0;
     double *pts = NULL;
     const char *why = NULL;
-    while (!why && fgets(line, sizeof line, f)) {
+    for (char *line = buf; !why && line < buf + size;) {
+        char *end = memchr(line, '\n', (size_t)(buf + size - line));
+        size_t len = end ? (size_t)(end - line) : (size_t)(buf + size - line);
+        char *next = end ? end + 1 : buf + size;
         lineno++;
-        size_t len = strlen(line);
-        if (len > 0 && line[len - 1] == '\n')
-            line[--len] = '\0';
-        else if (!feof(f)) {
+        if (memchr(line, '\0', len)) {
+            why = "a NUL byte";
+            break;
+        }
+        if (len > LINE_MAX_B) {
             why = "a line longer than 256 bytes";
             break;
         }
+        line[len] = '\0';
         if (len > 0 && line[len - 1] == '\r')
             line[--len] = '\0';
         if (lineno == 1) {
             if (strcmp(line, HEADER) != 0)
                 why = "expected the header x_m,y_m,z_m";
+            line = next;
             continue;
         }
         if (count == NS_PLAN_PATH_MAX_POINTS) {
@@ -96,9 +113,9 @@ int ns_plan_path_csv_read(const char *path, double **xyz, int *n, char *err, int
         }
         why = parse_point(line, pts + 3 * count);
         count += why == NULL;
+        line = next;
     }
-    if (!why && ferror(f))
-        why = "cannot read";
+    free(buf);
     if (!why && lineno == 0) {
         lineno = 1;
         why = "empty (expected the header x_m,y_m,z_m)";
@@ -107,7 +124,6 @@ int ns_plan_path_csv_read(const char *path, double **xyz, int *n, char *err, int
         lineno++;
         why = "a path needs at least 2 points";
     }
-    fclose(f);
     if (why) {
         free(pts);
         ns_set_err(err, err_sz, "%s:%ld: %s", path, lineno, why);

@@ -313,6 +313,8 @@ void ns_run_timing_json(NsJson *j, const NsRun *r);
 int ns_run_write_report(NsRun *r, const NsRunResults *res, uint64_t hash, char *err, int err_sz);
 /* engine/run_moments.c: pictures of the key moments, frames and video */
 int ns_run_render_setup(NsRun *r, char *err, int err_sz);
+/* --plan DIR: DIR/path.csv into r->prior_plan (plan_path_csv.h), before anything is written. */
+int ns_run_prior_plan_read(NsRun *r, char *err, int err_sz);
 int ns_run_render_before_step(NsRun *r);
 int ns_run_render_now(NsRun *r, const char *caption, bool final, const NsRunResults *res_in,
                       char *err, int err_sz);

@@ -30,6 +30,22 @@
 
 /* Opens the renderer once the tissue and the needle are built: the camera frames the tissue
  * and the needle as they start. */
+int ns_run_prior_plan_read(NsRun *r, char *err, int err_sz)
+{
+    if (!r->opt.plan_dir)
+        return 0;
+    size_t n = strlen(r->opt.plan_dir) + 16;
+    char *path = malloc(n);
+    if (!path) {
+        ns_set_err(err, err_sz, "out of memory");
+        return -1;
+    }
+    snprintf(path, n, "%s/path.csv", r->opt.plan_dir);
+    int rc = ns_plan_path_csv_read(path, &r->prior_plan, &r->prior_plan_n, err, err_sz);
+    free(path);
+    return rc;
+}
+
 int ns_run_render_setup(NsRun *r, char *err, int err_sz)
 {
     const NsRunCamera *cam = &r->spec.camera;
@@ -58,19 +74,6 @@ int ns_run_render_setup(NsRun *r, char *err, int err_sz)
     for (int k = 0; k < r->spec.obstacle_count; k++)
         if (r->spec.obstacles[k].region < regions)
             r->obstacle_region[r->spec.obstacles[k].region] = true;
-    if (r->opt.plan_dir) { /* --plan DIR: its path.csv, drawn in every frame */
-        size_t n = strlen(r->opt.plan_dir) + 16;
-        char *path = malloc(n);
-        if (!path) {
-            ns_set_err(err, err_sz, "out of memory");
-            return -1;
-        }
-        snprintf(path, n, "%s/path.csv", r->opt.plan_dir);
-        int rc = ns_plan_path_csv_read(path, &r->prior_plan, &r->prior_plan_n, err, err_sz);
-        free(path);
-        if (rc)
-            return -1;
-    }
     NsRunRenderOpts o = {.out_dir = r->opt.out_dir,
                          .frames = r->opt.frames,
                          .video = r->opt.video,

@@ -12,12 +12,14 @@
 #include <string.h>
 
 #include "err.h"
+#include "ns_limits.h"
 #include "run.h"
 #include "snapshot.h"
 #include "step.h"
 
 #define ROLLOUT_LENGTH_MIN  1e-3   /* [m] */
-#define ROLLOUT_LENGTH_MAX  0.05   /* [m] */
+#define ROLLOUT_LENGTH_MAX  0.1    /* [m] (act.steer's replan_every at most) */
+#define ROLLOUT_STEPS_MIN   3      /* the fit's parabola needs three points past the start */
 #define ROLLOUT_STEPS_MAX   5000   /* one rollout's steps */
 #define ROLLOUT_STEPS_TOTAL 400000 /* a run's rollout steps in all (a global budget) */
 
@@ -125,22 +127,28 @@ int ns_run_l_rollout(lua_State *L)
     NsRun *r = lua_touserdata(L, lua_upvalueindex(1));
     luaL_checktype(L, 1, LUA_TTABLE);
     double length = field(L, "length"), v = field(L, "speed");
-    if (!(length >= ROLLOUT_LENGTH_MIN && length <= ROLLOUT_LENGTH_MAX) || !(v > 0.0))
-        return luaL_error(L, "sim.planner.rollout: length must be in [%g, %g] m and speed > 0",
-                          ROLLOUT_LENGTH_MIN, ROLLOUT_LENGTH_MAX);
-    if (r->opt.checkpoint || r->opt.resume)
-        return luaL_error(L, "act.steer: rollouts read the world at their tick, and a run that "
-                             "writes or resumes a checkpoint replays its script without it "
-                             "(docs/planning.md)");
-    double steps = ceil(length / (v * r->spec.dt));
-    if (steps > ROLLOUT_STEPS_MAX)
-        return luaL_error(L,
-                          "sim.planner.rollout: %.0f steps (at most %d: a shorter length or "
-                          "a faster speed)",
-                          steps, ROLLOUT_STEPS_MAX);
-    if (r->steer.rollout_steps + (long)steps > ROLLOUT_STEPS_TOTAL)
-        return luaL_error(L, "act.steer: the run's rollouts would exceed %d steps in all",
-                          ROLLOUT_STEPS_TOTAL);
+    char msg[300];
+    msg[0] = '\0';
+    double steps = fmax(ceil(length / (v * r->spec.dt)), ROLLOUT_STEPS_MIN);
+    if (!(length >= ROLLOUT_LENGTH_MIN && length <= ROLLOUT_LENGTH_MAX) ||
+        !(v > 0.0 && v <= NS_LIMIT_INSERT_SPEED))
+        snprintf(msg, sizeof msg,
+                 "sim.planner.rollout: length must be in [%g, %g] m and speed in (0, %g] m/s",
+                 ROLLOUT_LENGTH_MIN, ROLLOUT_LENGTH_MAX, NS_LIMIT_INSERT_SPEED);
+    else if (r->opt.checkpoint || r->opt.resume)
+        snprintf(msg, sizeof msg,
+                 "act.steer: rollouts read the world at their tick, and a run that writes or "
+                 "resumes a checkpoint replays its script without it (docs/planning.md)");
+    else if (steps > ROLLOUT_STEPS_MAX)
+        snprintf(msg, sizeof msg,
+                 "sim.planner.rollout: %.0f steps (at most %d: a shorter length or a faster "
+                 "speed)",
+                 steps, ROLLOUT_STEPS_MAX);
+    else if (r->steer.rollout_steps + (long)steps > ROLLOUT_STEPS_TOTAL)
+        snprintf(msg, sizeof msg, "act.steer: the run's rollouts would exceed %d steps in all",
+                 ROLLOUT_STEPS_TOTAL);
+    if (msg[0]) /* formatted here: lua_pushfstring knows no %g */
+        return luaL_error(L, "%s", msg);
     RolloutFit f = {0};
     char err[512];
     double w0 = ns_wall_s();

@@ -144,6 +144,8 @@ static int plan(lua_State *L, Builder *b, ImplantIO *io)
     p.hole_count = nh;
     p.clearance = num(L, t, "clearance");
     p.spacing = num(L, t, "spacing");
+    p.seeds_per_needle = integer(L, t, "seeds_per_needle", 1, 1000);
+    p.tip_offset = num(L, t, "tip_offset");
     p.margin = num(L, t, "margin");
     p.seeds_max = integer(L, t, "seeds", 1, NS_DOSE_MAX_SEEDS);
     p.needles_max = integer(L, t, "needles", 1, NS_IMPLANT_MAX_HOLES);

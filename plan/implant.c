@@ -58,8 +58,10 @@ static int check_params(const NsImplantParams *p, char *err, int err_sz)
         why = "spacing must be in [1e-3, 0.05] m";
     else if (!(p->margin >= 0.0 && p->margin <= 0.05))
         why = "margin must be in [0, 0.05] m";
-    else if (p->seeds_max < 1 || p->needles_max < 1)
+    else if (p->seeds_max < 1 || p->needles_max < 1 || p->seeds_per_needle < 1)
         why = "the seed and needle budgets must be >= 1";
+    else if (!(p->tip_offset >= 0.0 && p->tip_offset <= 0.05))
+        why = "the tip's offset must be in [0, 0.05] m";
     else if (!(p->prescription > 0.0 && isfinite(p->prescription)))
         why = "the prescription must be > 0 Gy";
     else if (!(p->coverage > 0.0 && p->coverage <= 1.0))
@@ -94,19 +96,18 @@ static double *region_voxels(const NsImplantParams *p, long *n, char *err, int e
         ns_set_err(err, err_sz, "implant plan: the target region is unbounded");
         return NULL;
     }
-    long m[3];
-    double total = 1.0;
+    double mk[3], total = 1.0; /* counted in double: a huge box is refused before a cast */
     for (int k = 0; k < 3; k++) {
-        m[k] = (long)ceil((hi[k] - lo[k]) / p->grid);
-        m[k] = m[k] < 1 ? 1 : m[k];
-        total *= (double)m[k];
+        mk[k] = fmax(ceil((hi[k] - lo[k]) / p->grid), 1.0);
+        total *= mk[k];
     }
-    if (total > 8.0 * NS_IMPLANT_MAX_VOXELS) {
+    if (!(total <= 2.0 * NS_IMPLANT_MAX_VOXELS)) {
         ns_set_err(err, err_sz,
                    "implant plan: the region's box holds %.3g voxels at grid %g m (at most %ld)",
-                   total, p->grid, 8 * NS_IMPLANT_MAX_VOXELS);
+                   total, p->grid, 2 * NS_IMPLANT_MAX_VOXELS);
         return NULL;
     }
+    long m[3] = {(long)mk[0], (long)mk[1], (long)mk[2]};
     double *pts = NULL;
     long cap = 0, count = 0;
     for (long k = 0; k < m[2]; k++)
@@ -147,13 +148,38 @@ static double *region_voxels(const NsImplantParams *p, long *n, char *err, int e
     return pts;
 }
 
-/* Hole h's track: the region's first span along it [s0, s1], and whether the track up to the
- * deepest seed keeps the clearance. 0: no span; 1: a candidate (c filled); 2: blocked. */
-static int track(const NsImplantParams *p, const double dir[3], int h, double reach, Cand *c)
+/* The part [*t0, *t1] of the ray e + s dir (s >= 0) inside the box [lo, hi]; false if none. */
+static bool clip_ray(const double e[3], const double dir[3], const double lo[3], const double hi[3],
+                     double *t0, double *t1)
+{
+    double a = 0.0, b = INFINITY;
+    for (int k = 0; k < 3; k++) {
+        if (fabs(dir[k]) < 1e-300) {
+            if (e[k] < lo[k] || e[k] > hi[k])
+                return false;
+            continue;
+        }
+        double u = (lo[k] - e[k]) / dir[k], v = (hi[k] - e[k]) / dir[k];
+        a = fmax(a, fmin(u, v));
+        b = fmin(b, fmax(u, v));
+    }
+    *t0 = a;
+    *t1 = b;
+    return a <= b;
+}
+
+/* Hole h's track: the region's first span along it [s0, s1] (walked within the region's box
+ * only), its load (centred, at most seeds_per_needle), and whether the needle up to its tip
+ * keeps the clearance. 0: no span (or no seed past the skin); 1: a candidate (c filled); 2:
+ * blocked. */
+static int track(const NsImplantParams *p, const double dir[3], const double lo[3],
+                 const double hi[3], int h, Cand *c)
 {
     const double *e = p->holes + 3 * h;
-    double s0 = -1.0, s1 = -1.0;
-    for (double s = 0.0; s <= reach; s += TRACK_STEP) {
+    double a, b, s0 = -1.0, s1 = -1.0;
+    if (!clip_ray(e, dir, lo, hi, &a, &b))
+        return 0;
+    for (double s = a; s <= b; s += TRACK_STEP) {
         double x[3];
         pm_axpy(e, s, dir, x);
         if (in_region(p, p->target, x)) {
@@ -167,10 +193,13 @@ static int track(const NsImplantParams *p, const double dir[3], int h, double re
         return 0;
     double len = s1 - s0, mid = 0.5 * (s0 + s1);
     int n = len > 2.0 * p->margin ? (int)floor((len - 2.0 * p->margin) / p->spacing) + 1 : 1;
+    n = n < p->seeds_per_needle ? n : p->seeds_per_needle;
     c->hole = h;
     c->seeds = n;
     c->deepest = mid + 0.5 * (n - 1) * p->spacing;
-    for (double s = 0.0; s <= c->deepest + p->margin; s += TRACK_STEP) {
+    if (c->deepest - (n - 1) * p->spacing <= p->tip_offset)
+        return 0; /* the shallowest seed would sit at the skin */
+    for (double s = 0.0; s <= c->deepest + p->tip_offset; s += TRACK_STEP) {
         double x[3];
         pm_axpy(e, s, dir, x);
         if (avoid_distance(p, x) < p->clearance)
@@ -343,18 +372,28 @@ int ns_plan_implant(const NsImplantParams *p, NsImplantPlan *out, char *err, int
     double *pts = region_voxels(p, &n, err, err_sz);
     if (!pts)
         return -1;
-    /* how far along a track the region can lie: its box's farthest corner from any hole */
-    double lo[3], hi[3], reach = 0.0;
+    /* the region's box, grown by a step; every hole within NS_IMPLANT_MAX_REACH of it (a
+     * track is walked from its hole to past its tip, in steps) */
+    double lo[3], hi[3];
     ns_shape_bounds(p->regions[p->target], lo, hi);
-    for (int h = 0; h < p->hole_count; h++)
-        for (int k = 0; k < 8; k++) {
-            double corner[3] = {k & 1 ? hi[0] : lo[0], k & 2 ? hi[1] : lo[1],
-                                k & 4 ? hi[2] : lo[2]};
-            double v[3];
-            pm_sub(corner, p->holes + 3 * h, v);
-            double s = pm_dot(v, dir);
-            reach = s > reach ? s : reach;
+    for (int k = 0; k < 3; k++) {
+        lo[k] -= TRACK_STEP;
+        hi[k] += TRACK_STEP;
+    }
+    for (int h = 0; h < p->hole_count; h++) {
+        double d2 = 0.0;
+        for (int k = 0; k < 3; k++) {
+            double x = p->holes[3 * h + k], d = x < lo[k] ? lo[k] - x : x > hi[k] ? x - hi[k] : 0;
+            d2 += d * d;
         }
+        if (!(d2 <= NS_IMPLANT_MAX_REACH * NS_IMPLANT_MAX_REACH)) {
+            free(pts);
+            ns_set_err(err, err_sz,
+                       "implant plan: hole %d is more than %g m from the target region's box",
+                       h + 1, NS_IMPLANT_MAX_REACH);
+            return -1;
+        }
+    }
     Cand *c = calloc((size_t)p->hole_count, sizeof *c);
     double *cur = malloc((size_t)n * sizeof *cur), *tmp = malloc((size_t)n * sizeof *tmp);
     NsDoseSeed *seeds = NULL;
@@ -366,17 +405,23 @@ int ns_plan_implant(const NsImplantParams *p, NsImplantPlan *out, char *err, int
     }
     double work = 0.0; /* seed-voxel dose evaluations */
     for (int h = 0; h < p->hole_count; h++) {
-        int t = track(p, dir, h, reach, &c[nc]);
+        int t = track(p, dir, lo, hi, h, &c[nc]);
         out->candidates += t != 0;
         out->blocked += t == 2;
         if (t == 1)
             work += (double)c[nc++].seeds * (double)n;
     }
-    if (work > NS_IMPLANT_MAX_WORK) {
+    /* the dose vectors' memory and the greedy choice's work, before either is spent */
+    double bytes = (double)nc * (double)n * sizeof(double);
+    double greedy = (double)(p->needles_max < nc ? p->needles_max : nc) * (double)nc * (double)n;
+    if (work > NS_IMPLANT_MAX_WORK || bytes > NS_IMPLANT_MAX_BYTES ||
+        greedy > NS_IMPLANT_MAX_CHOICE) {
         ns_set_err(err, err_sz,
-                   "implant plan: %.3g seed-voxel dose evaluations (at most %.3g): a coarser "
-                   "grid or fewer holes",
-                   work, NS_IMPLANT_MAX_WORK);
+                   "implant plan: %d candidate tracks over %ld voxels need %.3g dose evaluations "
+                   "(at most %.3g), %.3g MB (at most %.3g) and %.3g steps to choose (at most "
+                   "%.3g): a coarser grid, fewer holes or fewer needles",
+                   nc, n, work, NS_IMPLANT_MAX_WORK, bytes / 1e6, NS_IMPLANT_MAX_BYTES / 1e6,
+                   greedy, NS_IMPLANT_MAX_CHOICE);
         nc = 0;
         goto done;
     }

@@ -17,7 +17,10 @@
 #define NS_IMPLANT_MAX_HOLES  1024
 #define NS_IMPLANT_MAX_AVOID  32
 #define NS_IMPLANT_MAX_VOXELS 400000L
-#define NS_IMPLANT_MAX_WORK   2e8 /* seed-voxel dose evaluations (a few seconds) */
+#define NS_IMPLANT_MAX_WORK   2e8   /* seed-voxel dose evaluations (a few seconds) */
+#define NS_IMPLANT_MAX_BYTES  256e6 /* the candidates' dose vectors */
+#define NS_IMPLANT_MAX_CHOICE 2e9   /* the greedy choice's voxel visits (a few seconds) */
+#define NS_IMPLANT_MAX_REACH  1.0   /* a hole's distance from the target region's box [m] */
 
 typedef struct NsImplantParams {
     /* The anatomy: `regions` in the tissue's order, later ones overriding earlier ones where
@@ -33,9 +36,11 @@ typedef struct NsImplantParams {
     const double *holes;
     int hole_count;
     double direction[3];
-    double spacing; /* seed centres along a needle [m] */
-    double margin;  /* the end seeds at least this far inside the region's span [m] */
-    int seeds_max;  /* the implant's seed budget */
+    double spacing;       /* seed centres along a needle [m] */
+    int seeds_per_needle; /* a needle's load at most (a longer span carries this many, centred) */
+    double tip_offset;    /* the needle's tip beyond its deepest seed's centre [m] */
+    double margin;        /* the end seeds at least this far inside the region's span [m] */
+    int seeds_max;        /* the implant's seed budget */
     int needles_max;
     double prescription; /* [Gy], total dose to full decay */
     double coverage;     /* the fraction of the region to bring to the prescription (V100) */

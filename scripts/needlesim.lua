@@ -1211,6 +1211,8 @@ function ns.plan_implant(t)
             "in [1e-3, 1e-2] [m]", 2e-3),
         margin = a:number("margin", function(x) return x >= 0 and x <= 0.02 end,
             "in [0, 0.02] [m]", 2e-3),
+        seeds_per_needle = LOAD_SEEDS_MAX,
+        tip_offset = SEED_LENGTH / 2, -- the tip beyond the deepest seed's centre (load_offsets)
     }
     local r, why = __ns_plan_implant(args_c)
     if not r then
@@ -1219,10 +1221,6 @@ function ns.plan_implant(t)
     local plan = { needles = {}, seeds = {}, v100 = r.v100, v150 = r.v150, d90 = r.d90,
         reached = r.reached, voxels = r.voxels, candidates = r.candidates, blocked = r.blocked }
     for i, n in ipairs(r.needles) do
-        if n.seeds > LOAD_SEEDS_MAX then
-            a:fail("the region's span along hole %s holds %d seeds (a needle carries at most %d)",
-                tpl.names[n.hole], n.seeds, LOAD_SEEDS_MAX)
-        end
         local load = { seeds = n.seeds, spacing = args_c.spacing }
         local hole = tpl.names[n.hole]
         local depth = n.deepest + load_offsets(load)[1]

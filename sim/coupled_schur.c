@@ -1327,11 +1327,16 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
                     memcmp(w->fixed, S->tfixed, (size_t)S->nt3) != 0)) {
         rc = refactor(w, S, st);
         w->refreshed = rc == 0;
+        if (rc)
+            S->why = "the tissue matrix could not be factored (not positive definite, or out of "
+                     "memory)";
     }
     /* The needle's band matrix is the same through the whole LCP: factored once here for the
      * compliance's 3q solves and one solve per PCG iteration. */
-    if (rc == 0 && ns_banded_factor(S->Ar, S->rfixed))
+    if (rc == 0 && ns_banded_factor(S->Ar, S->rfixed)) {
+        S->why = "the needle's band matrix could not be factored";
         rc = -1;
+    }
     if (rc == 0 && prepare(w, S, nscratch))
         rc = -1;
     TriedSet T;
@@ -1339,7 +1344,14 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
     int have_base = 0;
     st->consistent = 0;
     for (int trial = 0; trial < prm->max_trials && rc == 0; trial++) {
-        if (tried_add(&T, S->st) || factor_active(w, S, S->st)) {
+        if (tried_add(&T, S->st)) {
+            S->why = "out of memory";
+            rc = -1;
+            break;
+        }
+        if (factor_active(w, S, S->st)) {
+            S->why = "the contact block of the friction states tried is not positive definite, "
+                     "even shifted";
             rc = -1;
             break;
         }
@@ -1358,6 +1370,9 @@ int coupled_schur_lcp(CoupledSchur *w, CoupledSystem *S, NsCouplingStats *st)
         }
         int bad = 0;
         if (solve_exact(w, S, prm->tau_check, prm->tau_sol, next, &bad, st, nscratch)) {
+            if (!S->why)
+                S->why = "the preconditioned solve of the coupled system, or the tissue "
+                         "matrix's refactorization it asked for, failed";
             rc = -1;
             break;
         }

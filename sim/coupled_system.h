@@ -38,6 +38,8 @@ typedef struct CoupledSystem {
     uint8_t *st;     /* (q) friction states of the trial */
     int threads;
     int converged; /* the last solve reached its tolerance */
+    /* a failed solve: which linear solve failed (static text), or NULL */
+    const char *why;
 } CoupledSystem;
 
 /* The tissue point's value of a 3-vector field v (nodes x 3). */

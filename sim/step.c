@@ -141,8 +141,11 @@ static int friction_lcp(Step *s)
     if (finite)
         return 0;
     s->st.nan_count += rc == 0;
-    return fail(s, rc == 0 ? "the coupled solve gave non-finite accelerations"
-                           : "the coupled solve failed (its linear solves did not complete)");
+    if (rc == 0)
+        return fail(s, "the coupled solve gave non-finite accelerations");
+    snprintf(s->c->error, sizeof s->c->error, "the coupled solve failed (%s)",
+             S->why ? S->why : "its linear solves did not complete");
+    return -1;
 }
 
 /* 3. The accepted friction states, and the Newmark update of both (§3.1). */

@@ -74,6 +74,8 @@ static void fixture(Fixture *f, bool tube)
         .hole_count = 81,
         .direction = {0, 0, 1},
         .spacing = 0.01,
+        .seeds_per_needle = 20,
+        .tip_offset = 2.25e-3,
         .margin = 2e-3,
         .seeds_max = 200,
         .needles_max = 81,

@@ -179,6 +179,7 @@ bad_path "one point" "path.csv:3: a path needs at least 2 points" 'x_m,y_m,z_m\n
 bad_path "far away" "path.csv:2: a coordinate is not a finite number within 10 m" \
     'x_m,y_m,z_m\n1e9,0,0\n0,0,0\n'
 bad_path "empty" "path.csv:1: empty" ''
+bad_path "a NUL byte" "path.csv:3: a NUL byte" 'x_m,y_m,z_m\n0,0,0\n0,0,1\0junk'
 rm -f "$TMP/bad/path.csv"
 mkfifo "$TMP/bad/path.csv"
 expect_fail "run --plan: a FIFO" 1 "is a FIFO (named pipe), not a plan path" -- run $SC --plan "$TMP/bad" --steps 2 -o "$TMP/badrun"

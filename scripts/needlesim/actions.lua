@@ -600,7 +600,10 @@ function act.steer(t)
     local replans = 0
     while not done() and not sim.bone_contact do
         if rollout then -- the curvature a copy of the world gives the needle from here
-            local ro = P.rollout { length = math.max(every, ROLLOUT_MIN), speed = speed }
+            local ok, ro = pcall(P.rollout, { length = math.max(every, ROLLOUT_MIN), speed = speed })
+            if not ok then -- said at the scenario's line, not this file's
+                error((tostring(ro):gsub("^[^\n]-:%d+: ", "")), 2)
+            end
             kappa = math.max(0.05 * P.kappa, math.min(3 * P.kappa, ro.kappa))
         end
         local a = P.choose { tip = sim.tip, t = dir(), m2 = sim.bevel_direction,

@@ -34,21 +34,40 @@ elseif case == "raw" then
   local good = { regions = { box, pelvis.shapes.prostate }, target = 2, avoid = {},
     holes = { { 0, 0, 0 } }, direction = { 0, 0, 1 }, clearance = 0, seeds = 10, needles = 1,
     spacing = 0.01, margin = 0, prescription = 145, strength = 0.5, coverage = 0.5,
-    v150_max = 60, grid = 4e-3 }
-  local bad = {
-    { target = 1e300 }, { target = -3 }, { target = 2.5 }, { seeds = 2 ^ 62 }, { needles = "x" },
-    { avoid = { 1e300, -1 } }, { avoid = { 2 } }, { holes = { { 0, 0 } } }, { holes = {} },
-    { holes = { { 0 / 0, 0, 0 } } }, { direction = { 0, 0, 0 } }, { regions = { 1, 2 } },
-    { regions = {} }, { grid = 0 }, { grid = 1e-9 }, { spacing = -1 }, { strength = 0 / 0 },
-    { regions = { box, function(x, y, z) return 1 end } },
+    v150_max = 60, grid = 4e-3, seeds_per_needle = 20, tip_offset = 2.25e-3 }
+  local huge = ns.shape.sphere { center = { 0, 0, 0 }, radius = 1e300 }
+  local bad = { -- each change, and what the refusal must say
+    { { target = 1e300 }, "the target region is not one of the regions" },
+    { { target = -3 }, "the target region is not one of the regions" },
+    { { target = 2.5 }, "the target region is not one of the regions" },
+    { { seeds = 2 ^ 62 }, "budgets must be >= 1" },
+    { { needles = "x" }, "budgets must be >= 1" },
+    { { seeds_per_needle = 0 }, "budgets must be >= 1" },
+    { { avoid = { 1e300, -1 } }, "an avoided region is not one of the regions" },
+    { { avoid = { 2 } }, "an avoided region is not one of the regions, or is the target" },
+    { { holes = { { 0, 0 } } }, "holes[1] must be {x, y, z}" },
+    { { holes = {} }, "the template has 0 holes" },
+    { { holes = { { 0 / 0, 0, 0 } } }, "a hole is not a finite point" },
+    { { holes = { { 0, 0, -1e9 } } }, "hole 1 is more than 1 m from the target region's box" },
+    { { direction = { 0, 0, 0 } }, "the direction must be a finite non-zero vector" },
+    { { regions = { 1, 2 } }, "expected a shape" },
+    { { regions = {} }, "the tissue has 0 regions" },
+    { { regions = { box, huge } }, "the region's box holds" },
+    { { grid = 0 }, "the planning grid must be in" },
+    { { grid = 1e-9 }, "the planning grid must be in" },
+    { { spacing = -1 }, "spacing must be in" },
+    { { tip_offset = 1 }, "the tip's offset must be in" },
+    { { strength = 0 / 0 }, "a strength > 0" },
+    { { regions = { box, function(x, y, z) return 1 end } }, "shaped by a Lua function" },
   }
   local refused = 0
-  for i, change in ipairs(bad) do
+  for i, case in ipairs(bad) do
     local t = {}
     for k, v in pairs(good) do t[k] = v end
-    for k, v in pairs(change) do t[k] = v end
+    for k, v in pairs(case[1]) do t[k] = v end
     local r, why = raw(t)
     assert(r == nil and type(why) == "string", "bad call " .. i .. " was not refused")
+    assert(why:find(case[2], 1, true), "bad call " .. i .. ": " .. why)
     refused = refused + 1
   end
   assert(raw(good), "the good raw call failed")
