@@ -511,10 +511,7 @@ void ns_run_steer_report(NsJson *j, const NsRun *r, const NsRunResults *res)
     ns_json_int(j, s->rollouts);
     ns_json_key(j, "rollout_steps");
     ns_json_int(j, (int)s->rollout_steps);
-    ns_json_key(j, "rollout_ms_median");
-    if (s->rollouts > 0)
-        ns_json_number(j, ns_series_quantile(&s->rollout_ms, 0.5));
-    else
-        ns_json_null(j);
+    ns_json_key(j, "rollout_ms_median"); /* 0 without rollouts: a report holds no null */
+    ns_json_number(j, s->rollouts > 0 ? ns_series_quantile(&s->rollout_ms, 0.5) : 0.0);
     ns_json_end_object(j);
 }
