@@ -134,7 +134,13 @@ if [ ! -e out2/scores.csv ] && [ "$done_before" -ge 3 ] && [ "$done_before" -lt 
 else
     fail "kill" "$done_before scored, scores.csv $(ls out2/scores.csv 2>&1)"
 fi
-sleep 1 # the killed batch's replays end (they get SIGTERM with their parent)
+# The killed batch's replays get SIGTERM with their parent and clean up their own part files,
+# whose names a resumed replay of the same session reuses: wait until they have exited (a
+# second after a kill was not always enough on a loaded machine).
+for _ in $(seq 1 300); do
+    pgrep -f -- "--score-row -o out2/sessions/" >/dev/null || break
+    sleep 0.2
+done
 "$BIN" score "${logs[@]}" -o out2 --jobs 2 2>resume.err
 rc=$?
 if [ $rc = 0 ] && grep -q "14 sessions: $((14 - done_before)) replayed, $done_before already scored, 2 errors" resume.err; then
