@@ -136,9 +136,10 @@ else
 fi
 # The killed batch's replays get SIGTERM with their parent and clean up their own part files,
 # whose names a resumed replay of the same session reuses: wait until they have exited (a
-# second after a kill was not always enough on a loaded machine).
+# second after a kill was not always enough on a loaded machine). Their command lines name
+# out2/sessions/ (read from /proc: no procps needed; the bracket keeps grep from finding itself).
 for _ in $(seq 1 300); do
-    pgrep -f -- "--score-row -o out2/sessions/" >/dev/null || break
+    grep -qas -- "out2/session[s]/" /proc/[0-9]*/cmdline 2>/dev/null || break
     sleep 0.2
 done
 "$BIN" score "${logs[@]}" -o out2 --jobs 2 2>resume.err
