@@ -96,6 +96,13 @@ static double *region_voxels(const NsImplantParams *p, long *n, char *err, int e
         ns_set_err(err, err_sz, "implant plan: the target region is unbounded");
         return NULL;
     }
+    for (int k = 0; k < 3; k++)
+        if (!(hi[k] - lo[k] <= NS_IMPLANT_MAX_REACH)) { /* the tracks are walked across it */
+            ns_set_err(err, err_sz,
+                       "implant plan: the target region's box is more than %g m across",
+                       NS_IMPLANT_MAX_REACH);
+            return NULL;
+        }
     double mk[3], total = 1.0; /* counted in double: a huge box is refused before a cast */
     for (int k = 0; k < 3; k++) {
         mk[k] = fmax(ceil((hi[k] - lo[k]) / p->grid), 1.0);

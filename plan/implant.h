@@ -20,7 +20,7 @@
 #define NS_IMPLANT_MAX_WORK   2e8   /* seed-voxel dose evaluations (a few seconds) */
 #define NS_IMPLANT_MAX_BYTES  256e6 /* the candidates' dose vectors */
 #define NS_IMPLANT_MAX_CHOICE 2e9   /* the greedy choice's voxel visits (a few seconds) */
-#define NS_IMPLANT_MAX_REACH  1.0   /* a hole's distance from the target region's box [m] */
+#define NS_IMPLANT_MAX_REACH  1.0 /* a hole's distance from, and a side of, the region's box [m] */
 
 typedef struct NsImplantParams {
     /* The anatomy: `regions` in the tissue's order, later ones overriding earlier ones where

@@ -434,8 +434,8 @@ expect_error "plan_implant: no track keeps the clearance" 1 \
     "$P:29: ns.plan_implant: each of the 48 tracks that cross the target region comes within 90 mm of an avoided region" -- \
     check "$P" --set case=clearance
 run check "$P" --set case=raw
-if [ "$RC" = 0 ] && grep -q '^raw: 22 bad calls refused, the good one planned' "$ERR"; then
-    pass "plan_implant: the engine's half refuses 22 bad calls made round the Lua half, each for its reason"
+if [ "$RC" = 0 ] && grep -q '^raw: 23 bad calls refused, the good one planned' "$ERR"; then
+    pass "plan_implant: the engine's half refuses 23 bad calls made round the Lua half, each for its reason"
 else
     fail "plan_implant: the engine's half on bad calls" "exit $RC: $(head -c 300 "$ERR")"
 fi

@@ -36,6 +36,7 @@ elseif case == "raw" then
     spacing = 0.01, margin = 0, prescription = 145, strength = 0.5, coverage = 0.5,
     v150_max = 60, grid = 4e-3, seeds_per_needle = 20, tip_offset = 2.25e-3 }
   local huge = ns.shape.sphere { center = { 0, 0, 0 }, radius = 1e300 }
+  local long = ns.shape.box { center = { 0, 0, 0.05 }, size = { 1e4, 0.01, 0.01 } }
   local bad = { -- each change, and what the refusal must say
     { { target = 1e300 }, "the target region is not one of the regions" },
     { { target = -3 }, "the target region is not one of the regions" },
@@ -52,7 +53,8 @@ elseif case == "raw" then
     { { direction = { 0, 0, 0 } }, "the direction must be a finite non-zero vector" },
     { { regions = { 1, 2 } }, "expected a shape" },
     { { regions = {} }, "the tissue has 0 regions" },
-    { { regions = { box, huge } }, "the region's box holds" },
+    { { regions = { box, huge } }, "more than 1 m across" },
+    { { regions = { box, long } }, "more than 1 m across" },
     { { grid = 0 }, "the planning grid must be in" },
     { { grid = 1e-9 }, "the planning grid must be in" },
     { { spacing = -1 }, "spacing must be in" },
